@@ -187,7 +187,9 @@ def convex_overlap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
     """Distances between points ``(..., 2)`` and segments ``s0 -> s1`` (broadcast)."""
     d = s1 - s0
-    t = np.einsum("...d,...d->...", p - s0, d) / np.maximum(np.einsum("...d,...d->...", d, d), 1e-18)
+    t = np.einsum("...d,...d->...", p - s0, d) / np.maximum(
+        np.einsum("...d,...d->...", d, d), 1e-18
+    )
     closest = s0 + np.clip(t, 0.0, 1.0)[..., None] * d
     return np.linalg.norm(p - closest, axis=-1)
 
