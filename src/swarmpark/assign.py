@@ -1,0 +1,176 @@
+"""Goal assignment (2018 paper, Algorithm 2): Hungarian assignment with a chosen cost.
+
+Costs: ``sequential`` (goal i to robot i, the 2015 behaviour), ``euclidean``, ``formation``
+(the robots' centroid shifted onto the goals' centroid, then distances, so the group keeps its
+shape and nobody crosses the others' lanes), ``path`` (shortest free-space path lengths, given
+by the caller as a matrix). Goals only go to robots whose footprint fits them. Re-assignment
+every tick uses hysteresis so assignments do not chatter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import maximum_bipartite_matching
+
+__all__ = [
+    "COSTS",
+    "cost_matrix",
+    "assign",
+    "reassign",
+    "bottleneck_assignment",
+    "AssignmentError",
+]
+
+COSTS = ("sequential", "euclidean", "formation", "path")
+
+#: Cost that marks a robot/goal pair as impossible (the footprint does not fit the goal).
+INFEASIBLE = 1e9
+#: A swap must lower the total cost by this share (and this absolute amount) to be taken.
+HYSTERESIS_FRACTION = 0.1
+HYSTERESIS_ABS_M = 0.5
+
+
+class AssignmentError(ValueError):
+    """No assignment exists (more robots than goals, or footprints that fit no goal)."""
+
+
+def cost_matrix(
+    robot_xy: np.ndarray,
+    goal_xy: np.ndarray,
+    cost: str,
+    *,
+    path_lengths: np.ndarray | None = None,
+    fits: np.ndarray | None = None,
+) -> np.ndarray:
+    """Cost ``(R, G)`` of sending robot r to goal g.
+
+    Examples
+    --------
+    >>> r = np.array([[0.0, 0.0], [0.0, 1.0]])
+    >>> g = np.array([[5.0, 1.0], [5.0, 0.0]])
+    >>> cost_matrix(r, g, "formation").round(2).tolist()
+    [[5.1, 5.0], [5.0, 5.1]]
+    """
+    robot_xy = np.asarray(robot_xy, float).reshape(-1, 2)
+    goal_xy = np.asarray(goal_xy, float).reshape(-1, 2)
+    if cost == "sequential":
+        c = np.full((len(robot_xy), len(goal_xy)), INFEASIBLE / 2)
+        k = min(len(robot_xy), len(goal_xy))
+        c[np.arange(k), np.arange(k)] = 0.0
+    elif cost == "euclidean":
+        c = np.linalg.norm(robot_xy[:, None] - goal_xy[None], axis=-1)
+    elif cost == "formation":
+        shifted = robot_xy - robot_xy.mean(axis=0) + goal_xy.mean(axis=0)
+        # Distances of the shifted formation, plus a small share of the true distance to break
+        # ties between mirror-image matchings.
+        c = np.linalg.norm(shifted[:, None] - goal_xy[None], axis=-1) + 1e-2 * np.linalg.norm(
+            robot_xy[:, None] - goal_xy[None], axis=-1
+        )
+    elif cost == "path":
+        if path_lengths is None:
+            raise ValueError("cost 'path' needs path_lengths")
+        c = np.asarray(path_lengths, float).copy()
+        c[~np.isfinite(c)] = INFEASIBLE
+    else:
+        raise ValueError(f"assignment: unknown cost {cost!r} (one of {', '.join(COSTS)})")
+    if fits is not None:
+        c = np.where(fits, c, INFEASIBLE)
+    return c
+
+
+def assign(cost: np.ndarray) -> np.ndarray:
+    """Optimal assignment: ``goal_of[r]`` for every robot (Hungarian, scipy).
+
+    Raises :class:`AssignmentError` when some robot can only take an infeasible goal.
+    """
+    cost = np.asarray(cost, float)
+    r, g = cost.shape
+    if r > g:
+        raise AssignmentError(f"assignment: {r} robots but only {g} goals")
+    rows, cols = linear_sum_assignment(cost)
+    goal_of = np.empty(r, dtype=int)
+    goal_of[rows] = cols
+    if np.any(cost[np.arange(r), goal_of] >= INFEASIBLE):
+        bad = int(np.flatnonzero(cost[np.arange(r), goal_of] >= INFEASIBLE)[0])
+        raise AssignmentError(f"assignment: robot {bad} fits no free goal")
+    return goal_of
+
+
+def reassign(
+    cost: np.ndarray,
+    current: np.ndarray,
+    locked: np.ndarray | None = None,
+    *,
+    fraction: float = HYSTERESIS_FRACTION,
+    absolute: float = HYSTERESIS_ABS_M,
+) -> tuple[np.ndarray, bool]:
+    """Re-run the assignment with hysteresis.
+
+    The new optimum replaces ``current`` only if it lowers the total cost by more than
+    ``fraction`` of it and by more than ``absolute``. Robots in ``locked`` (parked) keep their
+    goals in the re-solve unless freeing them is what makes the saving. Returns the
+    assignment and whether it changed.
+    """
+    cost = np.asarray(cost, float)
+    idx = np.arange(len(current))
+    now = cost[idx, current].sum()
+    c = cost.copy()
+    if locked is not None and locked.any():
+        # Keep parked robots on their goals by making every other choice expensive for them.
+        c[locked] = np.where(
+            np.arange(c.shape[1])[None] == current[locked][:, None],
+            c[locked],
+            c[locked] + absolute * 4,
+        )
+    best = assign(c)
+    new = cost[idx, best].sum()
+    if now - new > max(fraction * now, absolute):
+        return best, True
+    return current, False
+
+
+def bottleneck_assignment(cost: np.ndarray) -> tuple[np.ndarray, float]:
+    """Assignment minimizing the largest cost (for lower bounds on makespan).
+
+    Binary search over the sorted costs for the smallest threshold admitting a perfect
+    matching (scipy's Hopcroft-Karp), then a Hungarian solve on the admissible pairs.
+
+    >>> c = np.array([[1.0, 10.0], [2.0, 3.0]])
+    >>> goal_of, worst = bottleneck_assignment(c)
+    >>> goal_of.tolist(), float(worst)
+    ([0, 1], 3.0)
+    """
+    cost = np.asarray(cost, float)
+    r = cost.shape[0]
+    values = np.unique(cost[np.isfinite(cost)])
+    lo, hi = 0, len(values) - 1
+
+    def perfect(th: float) -> bool:
+        m = maximum_bipartite_matching(csr_matrix((cost <= th).astype(np.int8)), perm_type="column")
+        return bool(np.all(m >= 0))
+
+    if len(values) == 0 or not perfect(values[hi]):
+        raise AssignmentError("assignment: no finite bottleneck assignment exists")
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if perfect(values[mid]):
+            hi = mid
+        else:
+            lo = mid + 1
+    th = values[lo]
+    goal_of = assign(np.where(cost <= th, cost, INFEASIBLE))
+    return goal_of, float(cost[np.arange(r), goal_of].max())
+
+
+def footprint_fits(
+    robot_dims: Sequence[tuple[float, float]], goal_dims: Sequence[tuple[float, float]]
+) -> np.ndarray:
+    """``(R, G)`` bool: robot r's (length, width) fits within goal g's slot (length, width)."""
+    rd = np.asarray(robot_dims, float).reshape(-1, 2)
+    gd = np.asarray(goal_dims, float).reshape(-1, 2)
+    tol = 1e-9
+    return (rd[:, None, 0] <= gd[None, :, 0] + tol) & (rd[:, None, 1] <= gd[None, :, 1] + tol)

@@ -1,0 +1,251 @@
+"""Run metrics: success, time to park, collisions, clearance, path length, deadlocks, bounds.
+
+:class:`MetricsRecorder` is fed once per tick with the state after the step and produces the
+result dictionary of the ``swarmpark run --json`` contract. Wall-clock tick times are measured
+by the runner and passed in; nothing here reads a clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .assign import AssignmentError, bottleneck_assignment
+from .geometry import wrap_angle
+from .gridmap import OccupancyGrid
+from .plan import build_costmap, distance_field_from
+
+__all__ = [
+    "POSITION_TOL_M",
+    "HEADING_TOL_RAD",
+    "DEADLOCK_WINDOW_S",
+    "MetricsRecorder",
+    "lower_bound_s",
+]
+
+POSITION_TOL_M = 0.10
+HEADING_TOL_RAD = np.deg2rad(5.0)
+#: A robot with an unreached goal and no progress for this long is in deadlock.
+DEADLOCK_WINDOW_S = 10.0
+#: Progress means the remaining distance fell by at least this much below its best so far.
+PROGRESS_M = 0.05
+#: Heading error counts toward the remaining distance at this lever arm (m per rad).
+HEADING_LEVER_M = 0.5
+#: Largest ratio of an 8-connected grid path length to the Euclidean length it stands for.
+OCTILE_RATIO = float(np.hypot(1.0, np.sqrt(2.0) - 1.0))
+
+
+@dataclass
+class Deadlock:
+    robot: str
+    start_s: float
+    end_s: float | None = None
+    resolved_by: str | None = None
+
+    def as_dict(self) -> dict:
+        dur = None if self.end_s is None else round(self.end_s - self.start_s, 3)
+        return {
+            "robot": self.robot,
+            "start_s": round(self.start_s, 3),
+            "end_s": None if self.end_s is None else round(self.end_s, 3),
+            "cleared_after_s": dur,
+            "resolved_by": self.resolved_by,
+        }
+
+
+def goal_errors(poses: np.ndarray, goals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position error (m) and absolute heading error (rad) of poses against goals."""
+    pos = np.linalg.norm(poses[:, :2] - goals[:, :2], axis=1)
+    head = np.abs(wrap_angle(poses[:, 2] - goals[:, 2]))
+    return pos, head
+
+
+@dataclass
+class MetricsRecorder:
+    ids: list[str]
+    start_poses: np.ndarray
+    path_length: np.ndarray = field(init=False)
+    collisions: list[dict] = field(default_factory=list)
+    min_clearance_robot: float = np.inf
+    min_clearance_static: float = np.inf
+    first_goal_s: float | None = None
+    lower_bound: float | None = None
+
+    def __post_init__(self) -> None:
+        n = len(self.ids)
+        self.path_length = np.zeros(n)
+        self._prev = np.asarray(self.start_poses, float).copy()
+        self._commanded = np.zeros(n, dtype=bool)
+        self._entered = np.full(n, np.nan)  # when the robot last entered its goal tolerance
+        self._best = np.full(n, np.inf)  # best remaining distance since the last progress
+        self._best_t = np.zeros(n)
+        self._deadlock: list[Deadlock | None] = [None] * n
+        self.deadlocks: list[Deadlock] = []
+        self.max_speed_seen = np.zeros(n)
+        self.tick_ms: list[float] = []
+        self.goal_changes = np.zeros(n, dtype=int)
+
+    def on_goal(self, t: float, idx: np.ndarray) -> None:
+        """Robots ``idx`` got a new goal at time ``t``."""
+        idx = np.atleast_1d(idx)
+        if self.first_goal_s is None and len(idx):
+            self.first_goal_s = t
+        self._commanded[idx] = True
+        self._entered[idx] = np.nan
+        self._best[idx] = np.inf
+        self._best_t[idx] = t
+        self.goal_changes[idx] += 1
+
+    def on_step(
+        self,
+        t: float,
+        poses: np.ndarray,
+        vel: np.ndarray,
+        goals: np.ndarray,
+        has_goal: np.ndarray,
+        paused: np.ndarray,
+        step,
+        tick_ms: float | None = None,
+    ) -> None:
+        """Record the state after one step (``paused``: stopped or e-stopped robots)."""
+        self.path_length += np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
+        self._prev = poses.copy()
+        self.max_speed_seen = np.maximum(self.max_speed_seen, np.abs(vel[:, 0]))
+        for c in step.new_contacts:
+            self.collisions.append(c.as_dict())
+        if step.clearance_robot_m is not None and len(poses) > 1:
+            self.min_clearance_robot = min(
+                self.min_clearance_robot, float(step.clearance_robot_m.min())
+            )
+        if step.clearance_static_m is not None and len(poses):
+            self.min_clearance_static = min(
+                self.min_clearance_static, float(step.clearance_static_m.min())
+            )
+        if tick_ms is not None:
+            self.tick_ms.append(tick_ms)
+
+        # Parking: when did each robot last enter its tolerance.
+        pos_err, head_err = goal_errors(poses, np.where(has_goal[:, None], goals, poses))
+        inside = has_goal & (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+        newly = inside & np.isnan(self._entered)
+        self._entered[newly] = t
+        self._entered[~inside] = np.nan
+
+        # Deadlocks: an unreached goal and no progress for DEADLOCK_WINDOW_S.
+        remaining = pos_err + HEADING_LEVER_M * head_err
+        improved = remaining < self._best - PROGRESS_M
+        reset = improved | paused | inside | ~has_goal
+        self._best = np.where(reset, remaining, self._best)
+        self._best_t = np.where(reset, t, self._best_t)
+        for i in range(len(self.ids)):
+            dl = self._deadlock[i]
+            if dl is None and t - self._best_t[i] >= DEADLOCK_WINDOW_S and has_goal[i]:
+                dl = Deadlock(self.ids[i], float(self._best_t[i]))
+                self._deadlock[i] = dl
+                self.deadlocks.append(dl)
+            elif dl is not None and reset[i]:
+                dl.end_s = t
+                dl.resolved_by = "progress" if improved[i] or inside[i] else "paused"
+                self._deadlock[i] = None
+
+    def stuck(self) -> np.ndarray:
+        """Robots currently in a deadlock."""
+        return np.array([d is not None for d in self._deadlock], dtype=bool)
+
+    def parked(self) -> np.ndarray:
+        return ~np.isnan(self._entered)
+
+    def result(
+        self, t_end: float, poses: np.ndarray, goals: np.ndarray, has_goal: np.ndarray
+    ) -> dict:
+        pos_err, head_err = goal_errors(poses, np.where(has_goal[:, None], goals, poses))
+        cmd = self._commanded & has_goal
+        parked = self.parked() & cmd
+        all_parked = bool(np.all(parked[cmd])) and bool(cmd.any())
+        success = all_parked and not self.collisions
+        time_to_park = None
+        if all_parked and self.first_goal_s is not None:
+            time_to_park = round(float(np.nanmax(self._entered[cmd])) - self.first_goal_s, 3)
+        clear = min(self.min_clearance_robot, self.min_clearance_static)
+        robots = {}
+        for i, rid in enumerate(self.ids):
+            robots[rid] = {
+                "commanded": bool(cmd[i]),
+                "parked": bool(parked[i]),
+                "parked_at_s": None
+                if np.isnan(self._entered[i])
+                else round(float(self._entered[i]), 3),
+                "path_length_m": round(float(self.path_length[i]), 4),
+                "final_position_error_m": round(float(pos_err[i]), 4) if has_goal[i] else None,
+                "final_heading_error_deg": round(float(np.rad2deg(head_err[i])), 3)
+                if has_goal[i]
+                else None,
+                "final_pose": [
+                    round(float(poses[i, 0]), 4),
+                    round(float(poses[i, 1]), 4),
+                    round(float(np.rad2deg(poses[i, 2])), 3),
+                ],
+            }
+        ticks = np.asarray(self.tick_ms) if self.tick_ms else np.zeros(1)
+        return {
+            "success": bool(success),
+            "time_to_park_s": time_to_park,
+            "lower_bound_s": None if self.lower_bound is None else round(self.lower_bound, 3),
+            "collisions": list(self.collisions),
+            "min_clearance_m": None if not np.isfinite(clear) else round(float(clear), 4),
+            "min_clearance_robot_m": None
+            if not np.isfinite(self.min_clearance_robot)
+            else round(self.min_clearance_robot, 4),
+            "min_clearance_wall_m": None
+            if not np.isfinite(self.min_clearance_static)
+            else round(self.min_clearance_static, 4),
+            "path_length_m": {rid: robots[rid]["path_length_m"] for rid in self.ids},
+            "deadlocks": [d.as_dict() for d in self.deadlocks],
+            "tick_ms": {
+                "mean": round(float(ticks.mean()), 4),
+                "p99": round(float(np.percentile(ticks, 99)), 4),
+            },
+            "sim_time_s": round(t_end, 3),
+            "robots": robots,
+        }
+
+
+def lower_bound_s(
+    grid: OccupancyGrid,
+    starts: np.ndarray,
+    goals: np.ndarray,
+    inscribed_m: float,
+    max_speed_mps: np.ndarray,
+) -> float | None:
+    """Makespan a perfect swarm would need: bottleneck-optimal assignment of shortest
+    free-space path lengths (each divided by that robot's max speed).
+
+    The free space is the map inflated by ``inscribed_m`` (the smallest inscribed radius in
+    the group), so every path is at most as long as one a real skid could drive: a bound.
+    """
+    starts = np.asarray(starts, float).reshape(-1, 3)
+    goals = np.asarray(goals, float).reshape(-1, 3)
+    # Rasterized walls are conservative by up to a cell, and cell-centre tests by another half:
+    # inflate by less so the grid's free space contains the true one.
+    radius = max(inscribed_m - 2.0 * grid.resolution_m, 0.0)
+    cm = build_costmap(grid, radius, radius)
+    rc = grid.world_to_cell(starts[:, :2])
+    inb = grid.in_bounds(rc)
+    times = np.full((len(starts), len(goals)), np.inf)
+    for g, goal in enumerate(goals):
+        field_m = distance_field_from(cm, goal[:2])
+        d = np.full(len(starts), np.inf)
+        d[inb] = field_m[rc[inb, 0], rc[inb, 1]]
+        # 8-connected grid lengths exceed the true length by up to OCTILE_RATIO (and start and
+        # goal cells by a cell each): shrink them so the bound stays a bound. The straight
+        # line is a bound too; take the larger of the two where the grid found a path.
+        straight = np.linalg.norm(starts[:, :2] - goal[:2], axis=1)
+        shrunk = d / OCTILE_RATIO - 2 * grid.resolution_m
+        times[:, g] = np.where(np.isfinite(d), np.maximum(shrunk, straight), np.inf)
+    times /= np.asarray(max_speed_mps, float)[:, None]
+    try:
+        _, worst = bottleneck_assignment(times)
+    except AssignmentError:
+        return None
+    return worst

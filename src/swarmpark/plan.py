@@ -1,0 +1,167 @@
+"""Grid path planning on an inflated costmap (Dijkstra via scikit-image's minimum-cost paths).
+
+The costmap follows Navigation2's idea: cells closer to an obstacle than the skid's inscribed
+radius are lethal; between the inscribed and circumscribed radius the cost rises so paths keep
+to the middle of corridors; beyond it the cost is the travelled distance. The search itself is
+``skimage.graph.MCP_Geometric`` (Dijkstra with diagonal moves weighted by length).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from skimage.graph import MCP_Geometric
+
+from .gridmap import OccupancyGrid
+
+__all__ = [
+    "Costmap",
+    "build_costmap",
+    "plan_path",
+    "distance_field_from",
+    "path_length",
+    "shortcut",
+]
+
+#: Extra cost (per metre travelled) at the inscribed radius, falling to 0 at the circumscribed.
+INFLATION_WEIGHT = 4.0
+
+
+@dataclass(frozen=True)
+class Costmap:
+    """Traversal cost per cell (``inf`` where lethal) for one skid size."""
+
+    cost: np.ndarray  # (H, W) float, >= 1 or inf
+    grid: OccupancyGrid
+    inscribed_m: float
+    circumscribed_m: float
+
+    def lethal(self) -> np.ndarray:
+        return ~np.isfinite(self.cost)
+
+
+def build_costmap(
+    grid: OccupancyGrid,
+    inscribed_m: float,
+    circumscribed_m: float,
+    extra_occupied: np.ndarray | None = None,
+) -> Costmap:
+    """Inflate ``grid`` (plus ``extra_occupied`` cells, e.g. detected obstacles) for a skid."""
+    occ = grid.occupied if extra_occupied is None else grid.occupied | extra_occupied
+    # Distance from each cell centre to the nearest occupied cell's edge (the map edge too).
+    d = np.maximum(ndimage.distance_transform_edt(np.pad(~occ, 1))[1:-1, 1:-1] - 0.5, 0.0)
+    d *= grid.resolution_m
+    span = max(circumscribed_m - inscribed_m, 1e-9)
+    cost = 1.0 + INFLATION_WEIGHT * np.clip((circumscribed_m - d) / span, 0.0, 1.0)
+    cost[d < inscribed_m] = np.inf
+    return Costmap(cost, grid, inscribed_m, circumscribed_m)
+
+
+def _free_disc(
+    cost: np.ndarray, grid: OccupancyGrid, xy: np.ndarray, radius_m: float
+) -> np.ndarray:
+    """Make the lethal-by-inflation cells within ``radius_m`` of ``xy`` passable (not walls).
+
+    A skid parked close to a wall sits inside its own inflation; it must still be able to
+    leave, and a goal next to a wall must still be reachable.
+    """
+    rc = grid.world_to_cell(xy[None])[0]
+    r = int(np.ceil(radius_m / grid.resolution_m))
+    h, w = cost.shape
+    r0, r1 = max(rc[0] - r, 0), min(rc[0] + r + 1, h)
+    c0, c1 = max(rc[1] - r, 0), min(rc[1] + r + 1, w)
+    if r0 >= r1 or c0 >= c1:
+        return cost
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    near = (rr - rc[0]) ** 2 + (cc - rc[1]) ** 2 <= r * r
+    win = cost[r0:r1, c0:c1]
+    fix = near & ~np.isfinite(win) & ~grid.occupied[r0:r1, c0:c1]
+    if fix.any():
+        cost = cost.copy()
+        cost[r0:r1, c0:c1][fix] = 1.0 + INFLATION_WEIGHT
+    return cost
+
+
+def plan_path(costmap: Costmap, start_xy, goal_xy, *, free_radius_m: float | None = None):
+    """Least-cost path from ``start_xy`` to ``goal_xy`` as world points ``(K, 2)``.
+
+    Returns ``None`` when the goal cannot be reached. The first point is ``start_xy`` and the
+    last ``goal_xy``; the interior points are grid cell centres, shortcut by line of sight.
+    """
+    grid = costmap.grid
+    start_xy = np.asarray(start_xy, float)
+    goal_xy = np.asarray(goal_xy, float)
+    r_free = costmap.inscribed_m if free_radius_m is None else free_radius_m
+    cost = _free_disc(costmap.cost, grid, start_xy, r_free)
+    cost = _free_disc(cost, grid, goal_xy, r_free)
+    s, g = grid.world_to_cell(np.stack([start_xy, goal_xy]))
+    if not (grid.in_bounds(s[None])[0] and grid.in_bounds(g[None])[0]):
+        return None
+    if not (np.isfinite(cost[tuple(s)]) and np.isfinite(cost[tuple(g)])):
+        return None
+    mcp = MCP_Geometric(cost, fully_connected=True)
+    cum, _ = mcp.find_costs([tuple(s)], [tuple(g)])
+    if not np.isfinite(cum[tuple(g)]):
+        return None
+    cells = np.asarray(mcp.traceback(tuple(g)))
+    pts = grid.cell_to_world(cells)
+    pts[0], pts[-1] = start_xy, goal_xy
+    return shortcut(pts, cost, grid)
+
+
+def shortcut(path: np.ndarray, cost: np.ndarray, grid: OccupancyGrid) -> np.ndarray:
+    """Drop waypoints that can be skipped by a straight segment through no costlier cells.
+
+    A segment is allowed if every cell it crosses has the minimum cost (1: outside every
+    inflation band) or no higher cost than the cells of the path it replaces.
+    """
+    if len(path) <= 2:
+        return path
+    out = [path[0]]
+    i = 0
+    step = grid.resolution_m / 2
+    while i < len(path) - 1:
+        j = len(path) - 1
+        while j > i + 1:
+            a, b = path[i], path[j]
+            n = max(int(np.linalg.norm(b - a) / step), 2)
+            samples = a + np.linspace(0, 1, n)[:, None] * (b - a)
+            rc = grid.world_to_cell(samples)
+            ok = grid.in_bounds(rc).all()
+            if ok:
+                seg_cost = cost[rc[:, 0], rc[:, 1]]
+                span = grid.world_to_cell(path[i : j + 1])
+                worst = cost[span[:, 0], span[:, 1]].max()
+                ok = bool(np.all(np.isfinite(seg_cost)) and seg_cost.max() <= max(worst, 1.0))
+            if ok:
+                break
+            j -= 1
+        out.append(path[j])
+        i = j
+    return np.asarray(out)
+
+
+def distance_field_from(
+    costmap: Costmap, goal_xy, *, free_radius_m: float | None = None
+) -> np.ndarray:
+    """Free-space path length (m, ``inf`` if unreachable) from every cell to ``goal_xy``.
+
+    One Dijkstra run per goal serves every robot (a column of the ``path`` cost matrix).
+    Inflation bands count as plain distance here (cost 1), so it is a length, not a cost.
+    """
+    grid = costmap.grid
+    goal_xy = np.asarray(goal_xy, float)
+    r_free = costmap.inscribed_m if free_radius_m is None else free_radius_m
+    lethal = ~np.isfinite(_free_disc(costmap.cost, grid, goal_xy, r_free))
+    unit = np.where(lethal, np.inf, 1.0)
+    g = grid.world_to_cell(goal_xy[None])[0]
+    if not grid.in_bounds(g[None])[0] or lethal[tuple(g)]:
+        return np.full(unit.shape, np.inf)
+    cum, _ = MCP_Geometric(unit, fully_connected=True).find_costs([tuple(g)])
+    return cum * grid.resolution_m
+
+
+def path_length(path: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1).sum())

@@ -1,0 +1,266 @@
+"""Fixed-step simulator of differential-drive rectangular skids, static solids and walking people.
+
+One :meth:`Simulator.step` takes commanded ``(v, omega)`` for every skid, applies the
+acceleration and speed limits, integrates the unicycle about each pivot exactly, and checks
+the proposed footprints against each other, the static solids and the people. A motion that
+would overlap anything is rejected for that step (the skid keeps its pose and stops, a person
+waits), so nothing tunnels through anything; the contact is recorded with both parties.
+
+The same step also measures every skid's clearance (footprint distance) to the nearest other
+skid and the nearest static solid, up to :data:`CLEARANCE_RANGE_M`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from scipy.spatial import cKDTree
+
+from .geometry import body_corners, convex_gap, footprint_corners, pivot_to_center, rect_disc_gap
+from .scenario import World
+
+__all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M"]
+
+#: Clearances beyond this distance are not tracked (reported as this value).
+CLEARANCE_RANGE_M = 2.0
+#: A contact episode ends once the two parties are this far apart again.
+CONTACT_RELEASE_M = 0.10
+#: Yaw rates below this are integrated as straight lines.
+_STRAIGHT_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact episode: the first step at which a motion by ``a`` or ``b`` was rejected."""
+
+    t_s: float
+    a: str
+    b: str
+    kind: str  # robot-robot, robot-wall, robot-obstacle, robot-person
+
+    def as_dict(self) -> dict:
+        return {"t_s": round(self.t_s, 6), "a": self.a, "b": self.b, "kind": self.kind}
+
+
+@dataclass
+class StepResult:
+    new_contacts: list[Contact] = field(default_factory=list)
+    blocked: np.ndarray | None = None  # (N,) bool, robots whose motion was rejected
+    clearance_robot_m: np.ndarray | None = None  # (N,) nearest other robot
+    clearance_static_m: np.ndarray | None = None  # (N,) nearest wall/obstacle
+
+
+def integrate_unicycle(poses: np.ndarray, v: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
+    """Exact arc integration of pivot poses ``(N, 3)`` under constant ``v, w`` for ``dt``."""
+    x, y, th = poses[:, 0], poses[:, 1], poses[:, 2]
+    dth = w * dt
+    straight = np.abs(w) < _STRAIGHT_EPS
+    safe_w = np.where(straight, 1.0, w)
+    dx = np.where(straight, v * dt * np.cos(th), v / safe_w * (np.sin(th + dth) - np.sin(th)))
+    dy = np.where(straight, v * dt * np.sin(th), -v / safe_w * (np.cos(th + dth) - np.cos(th)))
+    new_th = (th + dth + np.pi) % (2 * np.pi) - np.pi
+    return np.column_stack([x + dx, y + dy, new_th])
+
+
+class Simulator:
+    """Deterministic simulation of a :class:`~swarmpark.scenario.World`.
+
+    State: ``t`` (s), ``poses`` ``(N, 3)`` pivot poses, ``vel`` ``(N, 2)`` actual ``(v, omega)``,
+    ``person_s`` walked distance of every person.
+    """
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.ids = world.ids
+        self.dt = world.scenario.dt_s
+        robots = world.robots
+        self.footprints = [r.footprint for r in robots]
+        self.corners_body = body_corners(self.footprints)
+        self.center_offset = np.array([fp.center_offset_m for fp in self.footprints])
+        self.circumradius = np.array([fp.circumradius_m for fp in self.footprints])
+        self.max_speed = np.array([r.max_speed_mps for r in robots])
+        self.max_accel = np.array([r.max_accel_mps2 for r in robots])
+        self.max_yaw_rate = np.array([r.max_yaw_rate_radps for r in robots])
+        self.max_yaw_accel = np.array([r.max_yaw_accel_radps2 for r in robots])
+        self.t = 0.0
+        self.tick = 0
+        self.poses = np.stack([r.start for r in robots]).astype(float)
+        self.vel = np.zeros((len(robots), 2))
+        self.people = list(world.people)
+        self.person_s = np.zeros(len(self.people))
+        self.person_radius = np.array([p.radius_m for p in self.people])
+
+        # Static solids: convex pieces, with an STR-tree over their bounding boxes.
+        self.static_pieces, self.static_owner = world.static_convex_pieces()
+        lo, hi = self.static_pieces.min(axis=1), self.static_pieces.max(axis=1)
+        self._static_tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        self._active: set[tuple[str, str]] = set()
+
+    # ------------------------------------------------------------------ queries
+
+    @property
+    def n(self) -> int:
+        return len(self.ids)
+
+    def corners(self, poses: np.ndarray | None = None) -> np.ndarray:
+        """World footprint corners ``(N, 4, 2)``."""
+        return footprint_corners(self.poses if poses is None else poses, self.corners_body)
+
+    def person_positions(self, s: np.ndarray | None = None) -> np.ndarray:
+        s = self.person_s if s is None else s
+        if not self.people:
+            return np.zeros((0, 2))
+        return np.stack([p.position_at(si) for p, si in zip(self.people, s, strict=True)])
+
+    def people_done(self) -> bool:
+        """True when every non-looping person has finished the route."""
+        return all(
+            (not p.loop) and s >= p.route_length_m - 1e-9
+            for p, s in zip(self.people, self.person_s, strict=True)
+        )
+
+    # ------------------------------------------------------------------ stepping
+
+    def limit_command(self, cmd: np.ndarray) -> np.ndarray:
+        """Clip commanded ``(v, omega)`` ``(N, 2)`` to the speed and acceleration limits."""
+        v_cmd = np.clip(cmd[:, 0], -self.max_speed, self.max_speed)
+        w_cmd = np.clip(cmd[:, 1], -self.max_yaw_rate, self.max_yaw_rate)
+        dv = np.clip(v_cmd - self.vel[:, 0], -self.max_accel * self.dt, self.max_accel * self.dt)
+        dw = np.clip(
+            w_cmd - self.vel[:, 1], -self.max_yaw_accel * self.dt, self.max_yaw_accel * self.dt
+        )
+        return np.column_stack([self.vel[:, 0] + dv, self.vel[:, 1] + dw])
+
+    def step(self, cmd: np.ndarray, hold: np.ndarray | None = None) -> StepResult:
+        """Advance one fixed step.
+
+        Parameters
+        ----------
+        cmd
+            ``(N, 2)`` commanded ``(v, omega)`` per skid.
+        hold
+            ``(N,)`` bool: skids that must not move this step (e-stop); their velocity is zeroed.
+        """
+        dt = self.dt
+        vel = self.limit_command(np.asarray(cmd, dtype=float).reshape(self.n, 2))
+        if hold is not None:
+            vel[hold] = 0.0
+        proposed = integrate_unicycle(self.poses, vel[:, 0], vel[:, 1], dt)
+        new_s = self._people_progress(dt)
+
+        # Reject colliding motion until the configuration is clear. Reverting everyone involved
+        # always terminates: the previous configuration was clear.
+        robot_ok = np.ones(self.n, dtype=bool)
+        person_ok = np.ones(len(self.people), dtype=bool)
+        contacts: set[tuple[str, str, str]] = set()
+        clear_r = clear_s = None
+        near: set[tuple[str, str]] = set()
+        for _ in range(self.n + len(self.people) + 1):
+            poses = np.where(robot_ok[:, None], proposed, self.poses)
+            s = np.where(person_ok, new_s, self.person_s)
+            bad_r, bad_p, found, near, clear_r, clear_s = self._check(poses, s)
+            contacts |= found
+            moved_r = bad_r & robot_ok & np.any(proposed != self.poses, axis=1)
+            moved_p = bad_p & person_ok & (new_s != self.person_s)
+            if not moved_r.any() and not moved_p.any():
+                break
+            robot_ok &= ~moved_r
+            person_ok &= ~moved_p
+        self.poses = np.where(robot_ok[:, None], proposed, self.poses)
+        self.vel = np.where(robot_ok[:, None], vel, 0.0)
+        self.person_s = np.where(person_ok, new_s, self.person_s)
+        self.t = (self.tick + 1) * dt
+        self.tick += 1
+
+        # A contact episode is recorded once, when the pair first touches; it lasts while the
+        # pair stays within CONTACT_RELEASE_M (a bumper that nudges the wall again is one episode).
+        keys = {(a, b) for a, b, _ in contacts}
+        new = [
+            Contact(self.t, a, b, k) for a, b, k in sorted(contacts) if (a, b) not in self._active
+        ]
+        self._active = keys | (self._active & near)
+        return StepResult(new, ~robot_ok, clear_r, clear_s)
+
+    def _people_progress(self, dt: float) -> np.ndarray:
+        if not self.people:
+            return self.person_s
+        start = np.array([p.start_s for p in self.people])
+        speed = np.array([p.speed_mps for p in self.people])
+        length = np.array([np.inf if p.loop else p.route_length_m for p in self.people])
+        walking = self.t + dt > start + 1e-12
+        step = speed * np.clip(self.t + dt - np.maximum(start, self.t), 0.0, dt)
+        return np.where(walking, np.minimum(self.person_s + step, length), self.person_s)
+
+    def _check(self, poses: np.ndarray, person_s: np.ndarray):
+        """Collisions and clearances for a candidate configuration.
+
+        Returns robot and person collision masks, the contact pairs, the pairs closer than
+        CONTACT_RELEASE_M, and per-robot clearance to the nearest robot and to the nearest
+        static solid (capped at CLEARANCE_RANGE_M).
+        """
+        n = self.n
+        corners = self.corners(poses)
+        bad_r = np.zeros(n, dtype=bool)
+        bad_p = np.zeros(len(self.people), dtype=bool)
+        contacts: set[tuple[str, str, str]] = set()
+        near: set[tuple[str, str]] = set()
+        clear_r = np.full(n, CLEARANCE_RANGE_M)
+        clear_s = np.full(n, CLEARANCE_RANGE_M)
+
+        # Robot-robot: pairs whose centres are within reach (broad phase on a KD-tree).
+        centers = pivot_to_center(poses, self.center_offset)
+        if n > 1:
+            reach = 2 * self.circumradius.max() + CLEARANCE_RANGE_M
+            pairs = cKDTree(centers).query_pairs(reach, output_type="ndarray")
+            if len(pairs):
+                i, j = pairs[:, 0], pairs[:, 1]
+                gap = convex_gap(corners[i], corners[j])
+                np.minimum.at(clear_r, i, gap)
+                np.minimum.at(clear_r, j, gap)
+                hit = gap < 0
+                bad_r[i[hit]] = bad_r[j[hit]] = True
+                for a, b in zip(i[hit], j[hit], strict=True):
+                    contacts.add((self.ids[a], self.ids[b], "robot-robot"))
+                close = gap < CONTACT_RELEASE_M
+                near |= {
+                    (self.ids[a], self.ids[b]) for a, b in zip(i[close], j[close], strict=True)
+                }
+
+        # Robot-static: footprint bounding boxes grown by the clearance range, STR-tree query.
+        lo, hi = corners.min(axis=1) - CLEARANCE_RANGE_M, corners.max(axis=1) + CLEARANCE_RANGE_M
+        ri, si = self._static_tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        if len(ri):
+            gap = convex_gap(corners[ri], self.static_pieces[si])
+            np.minimum.at(clear_s, ri, gap)
+            hit = gap < 0
+            bad_r[ri[hit]] = True
+            for a, b in zip(ri[hit], si[hit], strict=True):
+                owner = self.static_owner[b]
+                kind = "robot-wall" if owner == "wall" else "robot-obstacle"
+                contacts.add((self.ids[a], owner, kind))
+            close = gap < CONTACT_RELEASE_M
+            near |= {
+                (self.ids[a], self.static_owner[b])
+                for a, b in zip(ri[close], si[close], strict=True)
+            }
+
+        # Robot-person: discs, tested against every footprint within reach.
+        if self.people:
+            ppos = self.person_positions(person_s)
+            d = np.linalg.norm(centers[:, None, :] - ppos[None], axis=-1)
+            ri, pi = np.nonzero(d < self.circumradius[:, None] + self.person_radius[None])
+            if len(ri):
+                gap = rect_disc_gap(corners[ri], ppos[pi], self.person_radius[pi])
+                hit = gap < 0
+                bad_r[ri[hit]] = True
+                bad_p[pi[hit]] = True
+                for a, b in zip(ri[hit], pi[hit], strict=True):
+                    contacts.add((self.ids[a], self.people[b].id, "robot-person"))
+                close = gap < CONTACT_RELEASE_M
+                near |= {
+                    (self.ids[a], self.people[b].id)
+                    for a, b in zip(ri[close], pi[close], strict=True)
+                }
+        return bad_r, bad_p, contacts, near, clear_r, clear_s

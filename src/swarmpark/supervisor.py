@@ -1,0 +1,497 @@
+"""The supervisor: operator commands, per-robot state, and the tick that holds the loop together.
+
+Each :meth:`Supervisor.tick` runs the scenario's due commands, re-runs the parking groups'
+assignment (with hysteresis), asks the controller for velocities from one snapshot of the
+swarm, steps the robot link (the simulator by default) and feeds the metrics.
+
+Commands are validated before anything changes: a refused command returns an
+:class:`Outcome` with the reason and the swarm keeps its previous orders.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from shapely.geometry import Polygon
+from shapely.ops import unary_union
+
+from . import assign as assign_mod
+from .control.base import Controller, ControlView
+from .geometry import GeometryError, as_simple_polygon
+from .metrics import HEADING_TOL_RAD, POSITION_TOL_M, MetricsRecorder, goal_errors, lower_bound_s
+from .scenario import CommandSpec, GotoCmd, ParkCmd, World
+from .sim import Simulator
+
+__all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
+
+ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
+#: Teleop commands older than this are dropped (the operator let go or the link died).
+TELEOP_TIMEOUT_S = 0.5
+
+
+@dataclass(frozen=True)
+class Outcome:
+    accepted: bool
+    command: str
+    reason: str = ""
+    t_s: float = 0.0
+    detail: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {
+            "accepted": self.accepted,
+            "command": self.command,
+            "reason": self.reason,
+            "t_s": round(self.t_s, 3),
+            **({"detail": self.detail} if self.detail else {}),
+        }
+
+
+@dataclass
+class ParkGroup:
+    """Robots parked together: their goals, the cost, and the current assignment."""
+
+    robots: np.ndarray  # robot indices
+    goals: np.ndarray  # (G, 3)
+    cost: str
+    goal_of: np.ndarray  # goal index per robot in `robots`
+    fill_order: tuple[int, ...]
+    boundary: Polygon
+    method: str
+    report: dict
+    switches: int = 0
+
+
+class Supervisor:
+    """Runs a :class:`World` with a controller on a robot link (the simulator by default)."""
+
+    def __init__(
+        self, world: World, controller: Controller | None = None, link: Simulator | None = None
+    ) -> None:
+        from .control.base import GoToPoseController
+
+        self.world = world
+        self.sim = link if link is not None else Simulator(world)
+        self.controller = controller if controller is not None else GoToPoseController()
+        n = self.sim.n
+        self.ids = list(world.ids)
+        self.index = {rid: i for i, rid in enumerate(self.ids)}
+        self.goals = np.zeros((n, 3))
+        self.has_goal = np.zeros(n, dtype=bool)
+        self.priority = np.array([r.priority for r in world.robots], float)
+        self.base_priority = self.priority.copy()
+        self.stopped = np.zeros(n, dtype=bool)
+        self.estopped = False
+        self.teleop = np.zeros(n, dtype=bool)
+        self._teleop_cmd = np.zeros((n, 2))
+        self._teleop_t = np.full(n, -np.inf)
+        self.goal_changed = np.zeros(n, dtype=bool)
+        self.groups: list[ParkGroup] = []
+        self.outcomes: list[Outcome] = []
+        self.metrics = MetricsRecorder(self.ids, self.sim.poses.copy())
+        self._pending = sorted(
+            enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
+        )
+        self._last_cmd = np.zeros((n, 2))
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def t(self) -> float:
+        return self.sim.t
+
+    def modes(self) -> list[str]:
+        """Per-robot state: idle, moving, parked, stopped, estopped, teleop or stuck."""
+        pos_err, head_err = goal_errors(self.sim.poses, self.goals)
+        at_goal = self.has_goal & (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+        stuck = self.metrics.stuck()
+        out = []
+        for i in range(self.sim.n):
+            if self.estopped:
+                out.append("estopped")
+            elif self.teleop[i]:
+                out.append("teleop")
+            elif self.stopped[i]:
+                out.append("stopped")
+            elif at_goal[i]:
+                out.append("parked")
+            elif stuck[i]:
+                out.append("stuck")
+            elif self.has_goal[i]:
+                out.append("moving")
+            else:
+                out.append("idle")
+        return out
+
+    def pending_done(self) -> bool:
+        return not self._pending
+
+    # ------------------------------------------------------------------ commands
+
+    def _refuse(self, command: str, reason: str) -> Outcome:
+        out = Outcome(False, command, reason, self.t)
+        self.outcomes.append(out)
+        return out
+
+    def _accept(self, command: str, **detail) -> Outcome:
+        out = Outcome(True, command, "", self.t, detail)
+        self.outcomes.append(out)
+        return out
+
+    def _robot_indices(self, names, command: str) -> np.ndarray | str:
+        if names == "all":
+            return np.arange(self.sim.n)
+        bad = [r for r in names if r not in self.index]
+        if bad:
+            return f"{command}: unknown robot {bad[0]!r}"
+        return np.array([self.index[r] for r in names], dtype=int)
+
+    def execute(self, cmd: CommandSpec) -> Outcome:
+        """Carry out one scenario/operator command (the union form of the scenario schema)."""
+        kind = cmd.kind
+        if kind == "park":
+            return self.park(cmd.park)  # type: ignore[arg-type]
+        if kind == "goto":
+            return self.goto(cmd.goto)  # type: ignore[arg-type]
+        if kind == "stop":
+            return self.stop(cmd.stop)  # type: ignore[arg-type]
+        if kind == "estop":
+            return self.estop()
+        return self.resume(cmd.resume)  # type: ignore[arg-type]
+
+    def plan_layout(self, cmd: ParkCmd):
+        """The layout a park command would produce (for previews); raises ValueError."""
+        from .layout import layout
+
+        idx = self._robot_indices(cmd.robots, "park.robots")
+        if isinstance(idx, str):
+            raise ValueError(idx)
+        boundary = as_simple_polygon(cmd.boundary, "park.boundary")
+        heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
+        fps = [self.world.robots[i].footprint for i in idx]
+        return (
+            idx,
+            boundary,
+            layout(
+                boundary,
+                fps,
+                heading=heading,
+                method=cmd.method,
+                margin_m=cmd.margin_m,
+                obstacles=self._known_solids(boundary),
+            ),
+        )
+
+    def _known_solids(self, region: Polygon):
+        """Walls and static obstacles the operator knows of, within ``region``."""
+        parts = [p for p in self.world.wall_polygons if p.intersects(region)]
+        if not self.world.wall_polygons:
+            geom = self.world.grid.occupied_geometry(region)
+            if not geom.is_empty:
+                parts.append(geom)
+        parts += [p for p in self.world.static_obstacles if p.intersects(region)]
+        return unary_union(parts) if parts else None
+
+    def park(self, cmd: ParkCmd) -> Outcome:
+        """Lay out goals in the boundary and assign them to the robots (all or nothing)."""
+        try:
+            idx, boundary, lay = self.plan_layout(cmd)
+        except (ValueError, GeometryError) as exc:
+            return self._refuse("park", str(exc))
+        busy = [self.ids[i] for i in idx if self.teleop[i]]
+        if busy:
+            return self._refuse("park", f"park.robots: robot {busy[0]!r} is under teleop")
+        goals = np.asarray(lay.poses, float)
+        fps = [self.world.robots[i].footprint for i in idx]
+        fits = assign_mod.footprint_fits(
+            [(f.length_m, f.width_m) for f in fps], [(f.length_m, f.width_m) for f in fps]
+        )
+        cost = self._cost_matrix(idx, goals, cmd.assignment, fits)
+        try:
+            goal_of = assign_mod.assign(cost)
+        except assign_mod.AssignmentError as exc:
+            return self._refuse("park", str(exc))
+        # The command is good: drop these robots from other groups and from goto orders.
+        self._leave_groups(idx)
+        group = ParkGroup(
+            idx,
+            goals,
+            cmd.assignment,
+            goal_of,
+            tuple(lay.fill_order),
+            boundary,
+            lay.method,
+            dict(lay.report),
+        )
+        self.groups.append(group)
+        self._set_goals(idx, goals[goal_of])
+        if self.metrics.lower_bound is None:
+            self.metrics.lower_bound = lower_bound_s(
+                self.world.grid,
+                self.sim.poses[idx],
+                goals,
+                min(f.width_m for f in fps) / 2,
+                self.sim.max_speed[idx],
+            )
+        return self._accept(
+            "park",
+            robots=[self.ids[i] for i in idx],
+            method=lay.method,
+            goals=np.round(goals[goal_of], 4).tolist(),
+        )
+
+    def _cost_matrix(self, idx: np.ndarray, goals: np.ndarray, cost: str, fits) -> np.ndarray:
+        lengths = None
+        if cost == "path":
+            lengths = self.controller_path_lengths(idx, goals)
+        return assign_mod.cost_matrix(
+            self.sim.poses[idx, :2], goals[:, :2], cost, path_lengths=lengths, fits=fits
+        )
+
+    def controller_path_lengths(self, idx: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Free-space path lengths robot -> goal ``(R, G)`` (one Dijkstra per goal)."""
+        from .plan import build_costmap, distance_field_from
+
+        widths = [self.world.robots[i].footprint.width_m for i in idx]
+        cm = build_costmap(self.world.grid, min(widths) / 2, min(widths) / 2)
+        rc = self.world.grid.world_to_cell(self.sim.poses[idx, :2])
+        out = np.full((len(idx), len(goals)), np.inf)
+        inb = self.world.grid.in_bounds(rc)
+        for g, goal in enumerate(goals):
+            f = distance_field_from(cm, goal[:2])
+            out[inb, g] = f[rc[inb, 0], rc[inb, 1]]
+        return out
+
+    def goto(self, cmd: GotoCmd) -> Outcome:
+        if cmd.robot not in self.index:
+            return self._refuse("goto", f"goto.robot: unknown robot {cmd.robot!r}")
+        i = self.index[cmd.robot]
+        if self.teleop[i]:
+            return self._refuse("goto", f"goto.robot: robot {cmd.robot!r} is under teleop")
+        goal = np.array([cmd.pose[0], cmd.pose[1], np.deg2rad(cmd.pose[2])])
+        reason = self._goal_reachability(i, goal)
+        if reason:
+            return self._refuse("goto", reason)
+        self._leave_groups(np.array([i]))
+        if cmd.priority is not None:
+            self.priority[i] = cmd.priority
+        self._set_goals(np.array([i]), goal[None])
+        return self._accept("goto", robot=cmd.robot, pose=np.round(goal, 4).tolist())
+
+    def _goal_reachability(self, i: int, goal: np.ndarray) -> str:
+        """Reason a goal pose cannot be taken (footprint in a wall or off the map), or ''."""
+        from .geometry import convex_gap, footprint_corners
+
+        corners = footprint_corners(goal[None], self.sim.corners_body[i : i + 1])
+        pieces = self.sim.static_pieces
+        gap = convex_gap(np.repeat(corners, len(pieces), axis=0), pieces)
+        if np.any(gap < 0):
+            owner = self.sim.static_owner[int(np.argmin(gap))]
+            return (
+                f"goto.pose: robot {self.ids[i]!r} would overlap {owner.replace(':', ' ')} at "
+                f"{[round(float(goal[0]), 3), round(float(goal[1]), 3), round(float(np.rad2deg(goal[2])), 1)]}"
+            )
+        return ""
+
+    def stop(self, names) -> Outcome:
+        idx = self._robot_indices(names, "stop")
+        if isinstance(idx, str):
+            return self._refuse("stop", idx)
+        self.stopped[idx] = True
+        return self._accept("stop", robots=[self.ids[i] for i in idx])
+
+    def estop(self) -> Outcome:
+        self.estopped = True
+        return self._accept("estop")
+
+    def resume(self, names) -> Outcome:
+        idx = self._robot_indices(names, "resume")
+        if isinstance(idx, str):
+            return self._refuse("resume", idx)
+        if names != "all" and self.estopped:
+            return self._refuse(
+                "resume", "resume: the e-stop is latched; resume 'all' to release it"
+            )
+        if names == "all":
+            self.estopped = False
+        self.stopped[idx] = False
+        return self._accept("resume", robots=[self.ids[i] for i in idx])
+
+    def set_teleop(self, robot: str, v: float, omega: float) -> Outcome:
+        """Take over one robot with a velocity command (hand it back with :meth:`release`)."""
+        if robot not in self.index:
+            return self._refuse("teleop", f"teleop.robot: unknown robot {robot!r}")
+        if not (np.isfinite(v) and np.isfinite(omega)):
+            return self._refuse("teleop", f"teleop: v and omega must be finite (got {v}, {omega})")
+        i = self.index[robot]
+        self.teleop[i] = True
+        self._teleop_cmd[i] = (v, omega)
+        self._teleop_t[i] = self.t
+        return self._accept("teleop", robot=robot)
+
+    def release(self, robot: str) -> Outcome:
+        if robot not in self.index:
+            return self._refuse("release", f"release.robot: unknown robot {robot!r}")
+        i = self.index[robot]
+        self.teleop[i] = False
+        self._teleop_cmd[i] = 0.0
+        self.goal_changed[i] = True  # autonomy takes over from wherever the operator left it
+        return self._accept("release", robot=robot)
+
+    def _leave_groups(self, idx: np.ndarray) -> None:
+        keep = []
+        for g in self.groups:
+            mask = ~np.isin(g.robots, idx)
+            if mask.all():
+                keep.append(g)
+            elif mask.any():
+                g.robots, g.goal_of = g.robots[mask], g.goal_of[mask]
+                keep.append(g)
+        self.groups = keep
+
+    def _set_goals(self, idx: np.ndarray, goals: np.ndarray) -> None:
+        changed = ~self.has_goal[idx] | np.any(np.abs(self.goals[idx] - goals) > 1e-9, axis=1)
+        self.goals[idx] = goals
+        self.has_goal[idx] = True
+        self.goal_changed[idx[changed]] = True
+        if changed.any():
+            self.metrics.on_goal(self.t, idx[changed])
+
+    # ------------------------------------------------------------------ the tick
+
+    def _run_due_commands(self) -> None:
+        eps = 1e-9
+        while self._pending and self._pending[0][1].at_s <= self.t + eps:
+            _, cmd = self._pending.pop(0)
+            self.execute(cmd)
+
+    def _reassign(self) -> None:
+        """Re-run each parking group's assignment (2018 Algorithm 2), with hysteresis."""
+        for g in self.groups:
+            if g.cost == "sequential" or len(g.robots) < 2:
+                continue
+            fps = [self.world.robots[i].footprint for i in g.robots]
+            dims = [(f.length_m, f.width_m) for f in fps]
+            fits = assign_mod.footprint_fits(dims, dims)
+            if g.cost == "path":
+                continue  # path costs are recomputed on replans only (Dijkstra per goal)
+            cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
+            pos_err, head_err = goal_errors(self.sim.poses[g.robots], g.goals[g.goal_of])
+            locked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+            try:
+                new, changed = assign_mod.reassign(cost, g.goal_of, locked)
+            except assign_mod.AssignmentError:
+                continue
+            if changed:
+                g.switches += int(np.sum(new != g.goal_of))
+                g.goal_of = new
+                self._set_goals(g.robots, g.goals[new])
+
+    def view(self) -> ControlView:
+        sim = self.sim
+        ppos = sim.person_positions()
+        pvel = np.zeros_like(ppos)
+        if len(ppos):
+            ahead = sim.person_positions(sim.person_s + 1e-3)
+            moving = self._people_walking()
+            speed = np.array([p.speed_mps for p in sim.people])
+            dirn = ahead - ppos
+            norm = np.linalg.norm(dirn, axis=1, keepdims=True)
+            pvel = np.where(
+                (norm > 0) & moving[:, None], dirn / np.maximum(norm, 1e-12) * speed[:, None], 0.0
+            )
+        return ControlView(
+            t=sim.t,
+            dt=sim.dt,
+            poses=sim.poses.copy(),
+            vel=sim.vel.copy(),
+            goals=self.goals.copy(),
+            active=self.has_goal & ~self.stopped & ~self.teleop & (not self.estopped),
+            priority=self.priority.copy(),
+            footprints=tuple(sim.footprints),
+            max_speed=sim.max_speed,
+            max_yaw_rate=sim.max_yaw_rate,
+            max_accel=sim.max_accel,
+            grid=self.world.grid,
+            people_xy=ppos,
+            people_vel=pvel,
+            people_radius=sim.person_radius,
+            static_pieces=sim.static_pieces,
+            goal_changed=self.goal_changed.copy(),
+        )
+
+    def _people_walking(self) -> np.ndarray:
+        sim = self.sim
+        return np.array(
+            [
+                sim.t >= p.start_s and (p.loop or s < p.route_length_m - 1e-9)
+                for p, s in zip(sim.people, sim.person_s, strict=True)
+            ],
+            dtype=bool,
+        )
+
+    def tick(self, tick_ms: float | None = None):
+        """One decision phase for every robot from one snapshot, then one move phase."""
+        self._run_due_commands()
+        self._reassign()
+        view = self.view()
+        cmd = np.asarray(self.controller.compute(view), float).reshape(self.sim.n, 2)
+        cmd[~view.active] = 0.0
+        fresh = self.teleop & (self.t - self._teleop_t <= TELEOP_TIMEOUT_S)
+        cmd[fresh] = self._teleop_cmd[fresh]
+        self.goal_changed[:] = False
+        hold = np.full(self.sim.n, self.estopped)
+        step = self.sim.step(cmd, hold=hold)
+        self._last_cmd = cmd
+        paused = self.stopped | self.teleop | self.estopped
+        self.metrics.on_step(
+            self.sim.t,
+            self.sim.poses,
+            self.sim.vel,
+            self.goals,
+            self.has_goal,
+            paused,
+            step,
+            tick_ms,
+        )
+        return step
+
+    def settled(self) -> bool:
+        """Every commanded robot is at its goal and at rest, and nothing else is pending."""
+        if self._pending or not self.has_goal.any():
+            return False
+        pos_err, head_err = goal_errors(self.sim.poses, self.goals)
+        at = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+        at_rest = np.abs(self.sim.vel).max(initial=0.0) < 1e-3
+        return bool(np.all(at[self.has_goal]) and at_rest and self.sim.people_done())
+
+    def snapshot(self) -> dict:
+        """The state streamed to the operator interface (JSON-ready, SI units, radians)."""
+        sim = self.sim
+        return {
+            "t_s": round(sim.t, 3),
+            "estop": self.estopped,
+            "robots": [
+                {
+                    "id": rid,
+                    "pose": [round(float(v), 4) for v in sim.poses[i]],
+                    "vel": [round(float(v), 4) for v in sim.vel[i]],
+                    "state": m,
+                    "goal": [round(float(v), 4) for v in self.goals[i]]
+                    if self.has_goal[i]
+                    else None,
+                    "priority": float(self.priority[i]),
+                    "footprint": {
+                        "length_m": sim.footprints[i].length_m,
+                        "width_m": sim.footprints[i].width_m,
+                        "pivot_from_rear_m": sim.footprints[i].pivot,
+                    },
+                }
+                for i, (rid, m) in enumerate(zip(self.ids, self.modes(), strict=True))
+            ],
+            "people": [
+                {"id": p.id, "xy": [round(float(v), 4) for v in xy], "radius_m": p.radius_m}
+                for p, xy in zip(sim.people, sim.person_positions(), strict=False)
+            ],
+        }

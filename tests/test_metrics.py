@@ -1,0 +1,95 @@
+"""Metrics on tiny scripted runs whose numbers can be checked by hand."""
+
+import numpy as np
+import pytest
+from helpers import Scripted, make_world
+
+from swarmpark.metrics import lower_bound_s
+from swarmpark.run import run_world
+
+
+def straight_run(**kw):
+    # v = 0.5 m/s commanded for 4 s then 0; accel 0.5 m/s^2, dt 0.05.
+    # Speeds step by 0.025: 20 steps up (0.025 .. 0.5), 60 at 0.5, then 20 down (0.475 .. 0).
+    # Distance = dt * (0.025 * (1 + ... + 20) + 60 * 0.5 + 0.025 * (0 + ... + 19))
+    #          = 0.05 * (5.25 + 30 + 4.75) = 2.0 m exactly.
+    world = make_world(
+        duration_s=8,
+        commands=[{"at_s": 0, "goto": {"robot": "a", "pose": [4.0, 3.0, 0.0]}}],
+        **kw,
+    )
+    ctl = Scripted(lambda t: [[0.5, 0.0]] if t < 4.0 - 1e-9 else [[0.0, 0.0]])
+    return run_world(world, controller=ctl)
+
+
+def test_path_length_and_parking_time_by_hand():
+    out = straight_run()
+    r = out.result
+    assert r["path_length_m"]["a"] == pytest.approx(2.0, abs=1e-9)
+    assert r["robots"]["a"]["final_position_error_m"] == pytest.approx(0.0, abs=1e-9)
+    assert r["success"] is True and r["collisions"] == []
+    # Within 0.10 m of x = 4 when x >= 3.9: 0.1 m before the end, during the slow-down
+    # (the last 5 steps cover 0.05 * 0.025 * (4+3+2+1+0) = 0.0125 m; the last 9: 0.045;
+    # the last 12: 0.0825; the last 13 reach 0.0975, the last 14 0.1135), so it enters
+    # tolerance after step 100 - 13 = 87: t = 4.35 s.
+    assert r["robots"]["a"]["parked_at_s"] == pytest.approx(4.35)
+    assert r["time_to_park_s"] == pytest.approx(4.35)
+    # Lower bound: 2 m at 0.5 m/s.
+    assert r["lower_bound_s"] is None  # no park command: the bound is for park commands
+
+
+def test_clearance_to_wall_by_hand():
+    # A wall 0.3 m above the robot's left side (y = 3.4): clearance 0.3 all along.
+    out = straight_run(
+        map={
+            "size_m": [10, 6],
+            "resolution_m": 0.05,
+            "walls": [[[0.5, 3.7], [9.5, 3.7], [9.5, 4.0], [0.5, 4.0]]],
+        }
+    )
+    assert out.result["min_clearance_wall_m"] == pytest.approx(0.3, abs=1e-9)
+    assert out.result["min_clearance_m"] == pytest.approx(0.3, abs=1e-9)
+
+
+def test_deadlock_is_reported_when_pushing_into_a_wall():
+    world = make_world(
+        duration_s=25,
+        map={
+            "size_m": [10, 6],
+            "resolution_m": 0.05,
+            "walls": [[[4, 0], [4.5, 0], [4.5, 6], [4, 6]]],
+        },
+        commands=[{"at_s": 0, "goto": {"robot": "a", "pose": [7.0, 3.0, 0.0]}}],
+    )
+    out = run_world(world, controller=Scripted(lambda t: [[0.5, 0.0]]))
+    r = out.result
+    assert r["success"] is False
+    assert len(r["collisions"]) == 1 and r["collisions"][0]["kind"] == "robot-wall"
+    (dl,) = r["deadlocks"]
+    assert dl["robot"] == "a" and dl["end_s"] is None
+    # The wall face is at x = 4: the pivot stops at 3.4 after about 2.9 s; the last progress
+    # of at least 0.05 m happens shortly before, then 10 s pass.
+    assert 2.0 < dl["start_s"] < 3.5
+
+
+def test_lower_bound_goes_around_a_wall():
+    world = make_world(
+        map={
+            "size_m": [10, 6],
+            "resolution_m": 0.05,
+            "walls": [[[4, 0], [4.5, 0], [4.5, 4.5], [4, 4.5]]],
+        }
+    )
+    starts = np.array([[2.0, 1.0, 0.0]])
+    goals = np.array([[7.0, 1.0, 0.0]])
+    lb = lower_bound_s(world.grid, starts, goals, 0.4, np.array([0.5]))
+    # The true shortest path for a disc of radius 0.4 goes over the wall's buffered top: the
+    # upper part of the convex hull of start, goal and the buffered wall above y = 1.
+    from shapely.geometry import MultiPoint, box
+    from shapely.ops import unary_union
+
+    wall = box(4, 0, 4.5, 4.5).buffer(0.4, quad_segs=64).intersection(box(0, 1, 10, 6))
+    hull = unary_union([wall, MultiPoint([(2, 1), (7, 1)])]).convex_hull
+    true_len = hull.exterior.length - 5.0
+    assert lb is not None
+    assert 0.9 * true_len / 0.5 < lb <= true_len / 0.5  # a bound, and a tight one
