@@ -26,6 +26,7 @@ __all__ = [
     "center_to_pivot",
     "convex_overlap",
     "convex_gap",
+    "convex_distance",
     "rect_disc_gap",
     "triangulate",
     "pad_polygons",
@@ -178,20 +179,29 @@ def convex_overlap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     when they are separated or touch.
     """
     axes = np.concatenate([_edge_normals(a), _edge_normals(b)], axis=1)  # (M, K+L, 2)
-    pa = np.einsum("mkd,mjd->mjk", a, axes)  # (M, axes, K)
-    pb = np.einsum("mld,mjd->mjl", b, axes)
+    ax, ay = axes[:, :, None, 0], axes[:, :, None, 1]
+    pa = ax * a[:, None, :, 0] + ay * a[:, None, :, 1]  # (M, axes, K)
+    pb = ax * b[:, None, :, 0] + ay * b[:, None, :, 1]
     overlap = np.minimum(pa.max(-1), pb.max(-1)) - np.maximum(pa.min(-1), pb.min(-1))
     return overlap.min(-1)
 
 
 def _point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
     """Distances between points ``(..., 2)`` and segments ``s0 -> s1`` (broadcast)."""
-    d = s1 - s0
-    t = np.einsum("...d,...d->...", p - s0, d) / np.maximum(
-        np.einsum("...d,...d->...", d, d), 1e-18
-    )
-    closest = s0 + np.clip(t, 0.0, 1.0)[..., None] * d
-    return np.linalg.norm(p - closest, axis=-1)
+    dx, dy = s1[..., 0] - s0[..., 0], s1[..., 1] - s0[..., 1]
+    px, py = p[..., 0] - s0[..., 0], p[..., 1] - s0[..., 1]
+    t = np.clip((px * dx + py * dy) / np.maximum(dx * dx + dy * dy, 1e-18), 0.0, 1.0)
+    ex, ey = px - t * dx, py - t * dy
+    return np.sqrt(ex * ex + ey * ey)
+
+
+def convex_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance ``(M,)`` between convex polygon pairs known not to overlap (0 if touching)."""
+    a_next, b_next = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
+    # Each vertex of one polygon against each edge of the other: (M, K, L).
+    d_ab = _point_segment_distance(a[:, :, None, :], b[:, None, :, :], b_next[:, None, :, :])
+    d_ba = _point_segment_distance(b[:, :, None, :], a[:, None, :, :], a_next[:, None, :, :])
+    return np.minimum(d_ab.min(axis=(1, 2)), d_ba.min(axis=(1, 2)))
 
 
 def convex_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -206,12 +216,7 @@ def convex_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     -0.5
     """
     depth = convex_overlap(a, b)
-    a_next, b_next = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
-    # Each vertex of one polygon against each edge of the other: (M, K, L).
-    d_ab = _point_segment_distance(a[:, :, None, :], b[:, None, :, :], b_next[:, None, :, :])
-    d_ba = _point_segment_distance(b[:, :, None, :], a[:, None, :, :], a_next[:, None, :, :])
-    dist = np.minimum(d_ab.min(axis=(1, 2)), d_ba.min(axis=(1, 2)))
-    return np.where(depth > TOUCH_TOLERANCE_M, -depth, dist)
+    return np.where(depth > TOUCH_TOLERANCE_M, -depth, convex_distance(a, b))
 
 
 def rect_disc_gap(corners: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:

@@ -18,7 +18,15 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from .geometry import body_corners, convex_gap, footprint_corners, pivot_to_center, rect_disc_gap
+from .geometry import (
+    TOUCH_TOLERANCE_M,
+    body_corners,
+    convex_distance,
+    convex_overlap,
+    footprint_corners,
+    pivot_to_center,
+    rect_disc_gap,
+)
 from .scenario import World
 
 __all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M"]
@@ -151,28 +159,30 @@ class Simulator:
         new_s = self._people_progress(dt)
 
         # Reject colliding motion until the configuration is clear. Reverting everyone involved
-        # always terminates: the previous configuration was clear.
+        # always terminates: the previous configuration was clear. After the first pass only
+        # the robots and people that were just reverted need checking again.
         robot_ok = np.ones(self.n, dtype=bool)
         person_ok = np.ones(len(self.people), dtype=bool)
+        robot_moves = np.any(proposed != self.poses, axis=1)
+        person_moves = new_s != self.person_s
+        focus_r, focus_p = robot_moves.copy(), person_moves.copy()
         contacts: set[tuple[str, str, str]] = set()
-        clear_r = clear_s = None
-        near: set[tuple[str, str]] = set()
-        for _ in range(self.n + len(self.people) + 1):
+        while focus_r.any() or focus_p.any():
             poses = np.where(robot_ok[:, None], proposed, self.poses)
             s = np.where(person_ok, new_s, self.person_s)
-            bad_r, bad_p, found, near, clear_r, clear_s = self._check(poses, s)
+            bad_r, bad_p, found = self._collisions(poses, s, focus_r, focus_p)
             contacts |= found
-            moved_r = bad_r & robot_ok & np.any(proposed != self.poses, axis=1)
-            moved_p = bad_p & person_ok & (new_s != self.person_s)
-            if not moved_r.any() and not moved_p.any():
-                break
-            robot_ok &= ~moved_r
-            person_ok &= ~moved_p
+            revert_r = bad_r & robot_ok & robot_moves
+            revert_p = bad_p & person_ok & person_moves
+            robot_ok &= ~revert_r
+            person_ok &= ~revert_p
+            focus_r, focus_p = revert_r, revert_p
         self.poses = np.where(robot_ok[:, None], proposed, self.poses)
         self.vel = np.where(robot_ok[:, None], vel, 0.0)
         self.person_s = np.where(person_ok, new_s, self.person_s)
         self.t = (self.tick + 1) * dt
         self.tick += 1
+        clear_r, clear_s, near = self._clearances()
 
         # A contact episode is recorded once, when the pair first touches; it lasts while the
         # pair stays within CONTACT_RELEASE_M (a bumper that nudges the wall again is one episode).
@@ -193,74 +203,116 @@ class Simulator:
         step = speed * np.clip(self.t + dt - np.maximum(start, self.t), 0.0, dt)
         return np.where(walking, np.minimum(self.person_s + step, length), self.person_s)
 
-    def _check(self, poses: np.ndarray, person_s: np.ndarray):
-        """Collisions and clearances for a candidate configuration.
+    def _collisions(
+        self, poses: np.ndarray, person_s: np.ndarray, focus_r: np.ndarray, focus_p: np.ndarray
+    ):
+        """Overlaps in a candidate configuration, among pairs with a focused member.
 
-        Returns robot and person collision masks, the contact pairs, the pairs closer than
-        CONTACT_RELEASE_M, and per-robot clearance to the nearest robot and to the nearest
-        static solid (capped at CLEARANCE_RANGE_M).
+        Returns robot and person collision masks and the contact pairs.
         """
         n = self.n
-        corners = self.corners(poses)
         bad_r = np.zeros(n, dtype=bool)
         bad_p = np.zeros(len(self.people), dtype=bool)
         contacts: set[tuple[str, str, str]] = set()
-        near: set[tuple[str, str]] = set()
+        corners = self.corners(poses)
+        centers = pivot_to_center(poses, self.center_offset)
+
+        # Robot-robot: circumscribed discs on a KD-tree, then the separating-axis test.
+        if n > 1 and focus_r.any():
+            pairs = cKDTree(centers).query_pairs(2 * self.circumradius.max(), output_type="ndarray")
+            if len(pairs):
+                i, j = pairs[:, 0], pairs[:, 1]
+                dist = np.linalg.norm(centers[i] - centers[j], axis=1)
+                keep = (focus_r[i] | focus_r[j]) & (
+                    dist < self.circumradius[i] + self.circumradius[j]
+                )
+                i, j = i[keep], j[keep]
+                hit = convex_overlap(corners[i], corners[j]) > TOUCH_TOLERANCE_M
+                bad_r[i[hit]] = bad_r[j[hit]] = True
+                contacts |= {
+                    (self.ids[a], self.ids[b], "robot-robot")
+                    for a, b in zip(i[hit], j[hit], strict=True)
+                }
+
+        # Robot-static: footprint bounding boxes on the STR-tree of the static pieces.
+        fr = np.flatnonzero(focus_r)
+        if len(fr):
+            lo, hi = corners[fr].min(axis=1), corners[fr].max(axis=1)
+            qi, si = self._static_tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+            ri = fr[qi]
+            hit = convex_overlap(corners[ri], self.static_pieces[si]) > TOUCH_TOLERANCE_M
+            bad_r[ri[hit]] = True
+            for a, b in zip(ri[hit], si[hit], strict=True):
+                owner = self.static_owner[b]
+                contacts.add(
+                    (self.ids[a], owner, "robot-wall" if owner == "wall" else "robot-obstacle")
+                )
+
+        # Robot-person: discs against every footprint within reach.
+        if self.people and (focus_r.any() or focus_p.any()):
+            ppos = self.person_positions(person_s)
+            d = np.linalg.norm(centers[:, None, :] - ppos[None], axis=-1)
+            near = d < self.circumradius[:, None] + self.person_radius[None]
+            near &= focus_r[:, None] | focus_p[None, :]
+            ri, pi = np.nonzero(near)
+            if len(ri):
+                hit = (
+                    rect_disc_gap(corners[ri], ppos[pi], self.person_radius[pi])
+                    < -TOUCH_TOLERANCE_M
+                )
+                bad_r[ri[hit]] = True
+                bad_p[pi[hit]] = True
+                contacts |= {
+                    (self.ids[a], self.people[b].id, "robot-person")
+                    for a, b in zip(ri[hit], pi[hit], strict=True)
+                }
+        return bad_r, bad_p, contacts
+
+    def _clearances(self):
+        """Per-robot footprint distance to the nearest robot and static solid (capped at
+        CLEARANCE_RANGE_M) in the current, collision-free configuration, and the pairs closer
+        than CONTACT_RELEASE_M (people included)."""
+        n = self.n
+        corners = self.corners()
+        centers = pivot_to_center(self.poses, self.center_offset)
         clear_r = np.full(n, CLEARANCE_RANGE_M)
         clear_s = np.full(n, CLEARANCE_RANGE_M)
-
-        # Robot-robot: pairs whose centres are within reach (broad phase on a KD-tree).
-        centers = pivot_to_center(poses, self.center_offset)
+        near: set[tuple[str, str]] = set()
         if n > 1:
             reach = 2 * self.circumradius.max() + CLEARANCE_RANGE_M
             pairs = cKDTree(centers).query_pairs(reach, output_type="ndarray")
             if len(pairs):
                 i, j = pairs[:, 0], pairs[:, 1]
-                gap = convex_gap(corners[i], corners[j])
+                dist = np.linalg.norm(centers[i] - centers[j], axis=1)
+                keep = dist - self.circumradius[i] - self.circumradius[j] < CLEARANCE_RANGE_M
+                i, j = i[keep], j[keep]
+                gap = convex_distance(corners[i], corners[j])
                 np.minimum.at(clear_r, i, gap)
                 np.minimum.at(clear_r, j, gap)
-                hit = gap < 0
-                bad_r[i[hit]] = bad_r[j[hit]] = True
-                for a, b in zip(i[hit], j[hit], strict=True):
-                    contacts.add((self.ids[a], self.ids[b], "robot-robot"))
                 close = gap < CONTACT_RELEASE_M
                 near |= {
                     (self.ids[a], self.ids[b]) for a, b in zip(i[close], j[close], strict=True)
                 }
-
-        # Robot-static: footprint bounding boxes grown by the clearance range, STR-tree query.
         lo, hi = corners.min(axis=1) - CLEARANCE_RANGE_M, corners.max(axis=1) + CLEARANCE_RANGE_M
         ri, si = self._static_tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
         if len(ri):
-            gap = convex_gap(corners[ri], self.static_pieces[si])
+            gap = convex_distance(corners[ri], self.static_pieces[si])
             np.minimum.at(clear_s, ri, gap)
-            hit = gap < 0
-            bad_r[ri[hit]] = True
-            for a, b in zip(ri[hit], si[hit], strict=True):
-                owner = self.static_owner[b]
-                kind = "robot-wall" if owner == "wall" else "robot-obstacle"
-                contacts.add((self.ids[a], owner, kind))
             close = gap < CONTACT_RELEASE_M
             near |= {
                 (self.ids[a], self.static_owner[b])
                 for a, b in zip(ri[close], si[close], strict=True)
             }
-
-        # Robot-person: discs, tested against every footprint within reach.
         if self.people:
-            ppos = self.person_positions(person_s)
+            ppos = self.person_positions()
             d = np.linalg.norm(centers[:, None, :] - ppos[None], axis=-1)
-            ri, pi = np.nonzero(d < self.circumradius[:, None] + self.person_radius[None])
+            lim = self.circumradius[:, None] + self.person_radius[None] + CONTACT_RELEASE_M
+            ri, pi = np.nonzero(d < lim)
             if len(ri):
                 gap = rect_disc_gap(corners[ri], ppos[pi], self.person_radius[pi])
-                hit = gap < 0
-                bad_r[ri[hit]] = True
-                bad_p[pi[hit]] = True
-                for a, b in zip(ri[hit], pi[hit], strict=True):
-                    contacts.add((self.ids[a], self.people[b].id, "robot-person"))
                 close = gap < CONTACT_RELEASE_M
                 near |= {
                     (self.ids[a], self.people[b].id)
                     for a, b in zip(ri[close], pi[close], strict=True)
                 }
-        return bad_r, bad_p, contacts, near, clear_r, clear_s
+        return clear_r, clear_s, near
