@@ -1,0 +1,282 @@
+"""Tests for swarmpark.layout: hand-checked layouts, errors, validation and properties."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from shapely.geometry import Polygon, box
+
+from swarmpark.geometry import Footprint, GeometryError, footprint_polygon
+from swarmpark.layout import METHODS, LayoutError, candidate_headings, capacity, layout
+from swarmpark.layout.validate import check_layout
+
+SQUARE4 = [[0, 0], [4, 0], [4, 4], [0, 4]]
+L_SHAPE = [[0, 0], [12, 0], [12, 4], [4, 4], [4, 10], [0, 10]]
+U_SHAPE = [[0, 0], [12, 0], [12, 9], [8, 9], [8, 4], [4, 4], [4, 9], [0, 9]]
+SKID = Footprint(1.2, 0.8, pivot_from_rear_m=0.3)
+
+
+def independent_check(res, footprints, boundary, margin, obstacles=None, tol=1e-6):
+    """Re-check a layout with plain shapely, without the package's validator."""
+    free = Polygon(boundary) if not isinstance(boundary, Polygon) else boundary
+    if obstacles is not None:
+        free = free.difference(obstacles)
+    polys = [footprint_polygon(p, fp) for p, fp in zip(res.poses, footprints, strict=True)]
+    for i, poly in enumerate(polys):
+        assert free.buffer(tol).covers(poly), f"goal {i} outside the free region"
+        assert poly.distance(free.boundary) >= margin - tol, f"goal {i} too close to the edge"
+        assert abs(res.poses[i, 2] - res.heading) < 1e-9
+    for i in range(len(polys)):
+        for j in range(i + 1, len(polys)):
+            assert polys[i].distance(polys[j]) >= margin - tol, f"goals {i},{j} too close"
+    assert sorted(res.fill_order) == list(range(len(polys)))
+
+
+# --- hand-checked stacking -------------------------------------------------------------------
+
+
+def test_nine_in_square_form_3x3_grid():
+    fp = Footprint(1.0, 1.0)
+    res = layout(SQUARE4, [fp] * 9, margin_m=0.25)
+    xs = sorted({round(float(x), 9) for x in res.poses[:, 0]})
+    ys = sorted({round(float(y), 9) for y in res.poses[:, 1]})
+    assert xs == [0.75, 2.0, 3.25] and ys == [0.75, 2.0, 3.25]
+    # Column scan from the left-most point: first column bottom to top.
+    np.testing.assert_allclose(res.poses[:3, :2], [[0.75, 0.75], [0.75, 2.0], [0.75, 3.25]])
+    assert res.report["min_spacing_m"] == pytest.approx(0.25)
+    assert res.report["min_boundary_clearance_m"] == pytest.approx(0.25)
+    assert res.report["method"] == "stacking" and res.method == "stacking"
+    independent_check(res, [fp] * 9, SQUARE4, 0.25)
+
+
+def test_poses_are_pivots_not_centres():
+    fp = Footprint(1.0, 1.0, pivot_from_rear_m=0.2)  # centre 0.3 m ahead of the pivot
+    res = layout(SQUARE4, [fp], margin_m=0.25)
+    np.testing.assert_allclose(res.poses[0], [0.45, 0.75, 0.0], atol=1e-12)
+    res = layout(SQUARE4, [fp], margin_m=0.25, heading=math.pi / 2)
+    # Facing +y: the centre is 0.3 m ahead (in +y) of the pivot.
+    np.testing.assert_allclose(res.poses[0], [3.25, 0.45, math.pi / 2], atol=1e-9)
+
+
+def test_does_not_fit_error_says_how_many():
+    fp = Footprint(1.0, 1.0)
+    with pytest.raises(LayoutError) as info:
+        layout(SQUARE4, [fp] * 10, margin_m=0.25)
+    assert info.value.fits == 9
+    msg = str(info.value)
+    assert msg.startswith("park.boundary: only 9 of 10 skids (1 x 1 m, margin 0.25 m) fit")
+    assert "'stacking'" in msg
+
+
+def test_bad_inputs_name_the_field():
+    with pytest.raises(GeometryError, match="park.boundary"):
+        layout([[0, 0], [4, 4], [4, 0], [0, 4]], [SKID])  # bow tie
+    with pytest.raises(LayoutError, match=r"park.method: .*'best'"):
+        layout(SQUARE4, [SKID], method="best")
+    with pytest.raises(LayoutError, match=r"park.margin_m: .*-1"):
+        layout(SQUARE4, [SKID], margin_m=-1)
+    with pytest.raises(LayoutError, match=r"park.heading: .*'north'"):
+        layout(SQUARE4, [SKID], heading="north")
+    with pytest.raises(LayoutError, match=r"park.footprints: at least one"):
+        layout(SQUARE4, [])
+    with pytest.raises(LayoutError, match=r"park.footprints\[1\]"):
+        layout(SQUARE4, [SKID, (1.0, 2.0)])
+    with pytest.raises(LayoutError, match=r"park.opening"):
+        layout(SQUARE4, [SKID], opening=(1.0, "x"))
+    with pytest.raises(LayoutError) as info:
+        layout(SQUARE4, [SKID], obstacles=box(-1, -1, 5, 5))
+    assert info.value.fits == 0
+
+
+def test_heading_rotates_the_grid():
+    fp = Footprint(1.0, 0.5)
+    res0 = layout([[0, 0], [10, 0], [10, 3], [0, 3]], [fp] * 6, margin_m=0.2)
+    independent_check(res0, [fp] * 6, [[0, 0], [10, 0], [10, 3], [0, 3]], 0.2)
+    rot = [[0, 0], [3, 0], [3, 10], [0, 10]]
+    res90 = layout(rot, [fp] * 6, margin_m=0.2, heading=math.pi / 2)
+    independent_check(res90, [fp] * 6, rot, 0.2)
+    assert res90.heading == pytest.approx(math.pi / 2)
+
+
+@pytest.mark.parametrize("shape", [L_SHAPE, U_SHAPE], ids=["L", "U"])
+def test_non_convex_boundaries(shape):
+    res = layout(shape, [SKID] * 20)
+    independent_check(res, [SKID] * 20, shape, 0.3)
+    assert res.report["egress_ok"]
+
+
+def test_obstacle_inside_boundary_is_avoided():
+    outer = [[0, 0], [8, 0], [8, 6], [0, 6]]
+    pillar = box(3.0, 2.0, 5.0, 4.0)
+    res = layout(outer, [SKID] * 12, obstacles=pillar)
+    independent_check(res, [SKID] * 12, outer, 0.3, obstacles=pillar)
+    # Fewer fit than without the pillar.
+    assert (
+        capacity(outer, SKID, obstacles=pillar).report["capacity"]
+        < (capacity(outer, SKID).report["capacity"])
+    )
+
+
+def test_polygon_holes_are_obstacles():
+    shell = [(0, 0), (8, 0), (8, 6), (0, 6)]
+    hole = [(3, 2), (5, 2), (5, 4), (3, 4)]
+    res = layout(Polygon(shell, [hole]), [SKID] * 12)
+    independent_check(res, [SKID] * 12, shell, 0.3, obstacles=Polygon(hole))
+
+
+def test_line_obstacle_splits_region():
+    rect = [[0, 0], [6, 0], [6, 2], [0, 2]]
+    wall = shapely.LineString([(3, -1), (3, 3)])
+    fp = Footprint(1.0, 0.8)
+    res = layout(rect, [fp] * 4, obstacles=wall, margin_m=0.2)
+    for p in res.poses:
+        poly = footprint_polygon(p, fp)
+        assert poly.distance(wall) >= 0.2 - 1e-6
+    # Two each side of the wall; a fifth would need to straddle it.
+    assert sorted(res.poses[:, 0] < 3.0) == [False, False, True, True]
+    with pytest.raises(LayoutError) as info:
+        layout(rect, [fp] * 5, obstacles=wall, margin_m=0.2)
+    assert info.value.fits == 4
+
+
+def test_mixed_footprints():
+    fps = [Footprint(1.2, 0.8), Footprint(2.0, 1.0), Footprint(0.8, 0.6), Footprint(2.0, 1.0)] * 3
+    res = layout(L_SHAPE, fps)
+    independent_check(res, fps, L_SHAPE, 0.3)
+    assert res.poses.shape == (12, 3)
+
+
+def test_capacity_matches_grid_count():
+    fp = Footprint(1.0, 1.0)
+    cap = capacity(SQUARE4, fp, margin_m=0.25)
+    assert cap.report["capacity"] == 9 and cap.poses.shape == (9, 3)
+    assert capacity(SQUARE4, Footprint(5.0, 1.0)).report["capacity"] == 0
+
+
+def test_capacity_elevator_question():
+    # "Will 12 fit on this elevator?" 7 x 4 m platform, 1.2 x 0.8 skids, 0.3 m margin:
+    # columns of pitch 1.5 m: floor((7 - 0.3) / 1.5) = 4; rows of 1.1 m: floor(3.7/1.1) = 3.
+    elevator = [[0, 0], [7, 0], [7, 4], [0, 4]]
+    cap = capacity(elevator, SKID)
+    assert cap.report["capacity"] == 12
+    independent_check(cap, [SKID] * 12, elevator, 0.3)
+    with pytest.raises(LayoutError) as info:
+        layout(elevator, [SKID] * 13)
+    assert info.value.fits == 12
+
+
+def test_heading_auto_picks_the_roomier_heading():
+    # A 1.9 m wide corridor: 1.6 x 0.6 skids (+ 2 x 0.2 m margin) fit only along it, two
+    # abreast (0.2 + 0.6 + 0.2 + 0.6 + 0.2 = 1.8 m).
+    corridor = [[0, 0], [1.9, 0], [1.9, 12], [0, 12]]
+    fp = Footprint(1.6, 0.6)
+    res = layout(corridor, [fp] * 6, heading="auto", margin_m=0.2)
+    assert abs(math.cos(res.heading)) < 1e-9  # 90 degrees
+    assert res.report["heading_deg"] == pytest.approx(90.0)
+    assert "auto_heading" in res.report
+    cap = capacity(corridor, fp, heading="auto", margin_m=0.2)
+    assert cap.report["capacity"] == 2 * 6  # rows of pitch 1.8 m: floor(11.8 / 1.8) = 6
+    assert capacity(corridor, fp, margin_m=0.2).report["capacity"] == 0
+
+
+def test_candidate_headings():
+    hs = candidate_headings([[0, 0], [4, 0], [0, 3]])
+    np.testing.assert_allclose(np.degrees(hs), [0, 90, -36.8698976, 53.1301024], atol=1e-6)
+
+
+def test_fill_order_deepest_first():
+    fp = Footprint(1.0, 1.0)
+    # Opening in the middle of the bottom edge: the top row is deepest and filled first.
+    res = layout(SQUARE4, [fp] * 9, margin_m=0.25, opening=(2.0, -1.0))
+    ys = res.poses[list(res.fill_order), 1]
+    assert np.all(np.diff(ys) <= 1e-9)
+    assert res.report["egress_ok"] and res.report["egress_layers"] == 3
+    assert res.report["opening"] == pytest.approx([2.0, 0.0])
+
+
+def test_egress_unreachable_goal_is_reported():
+    # Two rooms joined by a slot narrower than the skid: goals in the far room are unreachable.
+    shape = [[0, 0], [9, 0], [9, 4], [0, 4]]
+    wall = box(4.0, 0.0, 4.5, 3.5)  # leaves a 0.5 m gap at the top, skids are 0.8 m wide
+    res = layout(shape, [SKID] * 9, obstacles=wall, opening=(0.0, 2.0))
+    assert not res.report["egress_ok"]
+    assert any("egress" in n for n in res.report["notices"])
+    far = [i for i in range(9) if res.poses[i, 0] > 4.5]
+    assert far  # stacking reached the far room
+    # Unreachable goals come first in the fill order.
+    assert set(res.fill_order[: len(far)]) == set(far)
+
+
+def test_check_layout_flags_problems():
+    fp = Footprint(1.0, 1.0)
+    free = box(0, 0, 4, 2)
+    good = np.array([[1.0, 1.0, 0.0], [2.5, 1.0, 0.0]])
+    assert check_layout(good, [fp, fp], free, 0.5).ok
+    close = np.array([[1.0, 1.0, 0.0], [2.2, 1.0, 0.0]])
+    chk = check_layout(close, [fp, fp], free, 0.5)
+    assert not chk.ok and chk.close_pairs == ((0, 1),)
+    assert chk.min_spacing_m == pytest.approx(0.2)
+    out = np.array([[0.3, 1.0, 0.0]])
+    chk = check_layout(out, [fp], free, 0.5)
+    assert not chk.ok and chk.outside == (0,) and chk.min_boundary_clearance_m == 0.0
+    overlap = np.array([[1.0, 1.0, 0.0], [1.5, 1.0, 0.3]])
+    chk = check_layout(overlap, [fp, fp], box(-5, -5, 5, 5), 0.1)
+    assert chk.close_pairs == ((0, 1),) and chk.min_spacing_m == 0.0
+
+
+def test_deterministic():
+    a = layout(U_SHAPE, [SKID] * 15, heading="auto")
+    b = layout(U_SHAPE, [SKID] * 15, heading="auto")
+    np.testing.assert_array_equal(a.poses, b.poses)
+    assert a.fill_order == b.fill_order
+
+
+# --- properties ------------------------------------------------------------------------------
+
+
+@st.composite
+def star_polygons(draw):
+    """Random simple polygons: star-shaped about the origin (sorted angles, random radii)."""
+    k = draw(st.integers(4, 10))
+    angles = np.sort(
+        draw(
+            st.lists(st.floats(0, 2 * np.pi, exclude_max=True), min_size=k, max_size=k, unique=True)
+        )
+    )
+    radii = draw(st.lists(st.floats(2.0, 8.0), min_size=k, max_size=k))
+    pts = np.column_stack([radii * np.cos(angles), radii * np.sin(angles)])
+    poly = Polygon(pts)
+    if not poly.is_valid or poly.area < 1.0:
+        from hypothesis import reject
+
+        reject()
+    return pts.tolist()
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    boundary=star_polygons(),
+    n=st.integers(1, 12),
+    length=st.floats(0.5, 2.0),
+    width=st.floats(0.4, 1.2),
+    heading=st.floats(-np.pi, np.pi),
+    margin=st.floats(0.0, 0.5),
+)
+def test_property_stacking_valid_or_clear_error(boundary, n, length, width, heading, margin):
+    fp = Footprint(length, width)
+    try:
+        res = layout(boundary, [fp] * n, heading=heading, margin_m=margin)
+    except LayoutError as exc:
+        assert exc.fits is not None and exc.fits < n
+        assert f"only {exc.fits} of {n} skids" in str(exc)
+        return
+    independent_check(res, [fp] * n, boundary, margin)
+
+
+def test_methods_are_the_three_of_the_papers():
+    assert METHODS == ("stacking", "potential", "convex")
