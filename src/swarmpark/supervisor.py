@@ -69,11 +69,11 @@ class Supervisor:
     def __init__(
         self, world: World, controller: Controller | None = None, link: Simulator | None = None
     ) -> None:
-        from .control.base import GoToPoseController
+        from .control.navigate import Navigator  # the default navigation stack
 
         self.world = world
         self.sim = link if link is not None else Simulator(world)
-        self.controller = controller if controller is not None else GoToPoseController()
+        self.controller = controller if controller is not None else Navigator()
         n = self.sim.n
         self.ids = list(world.ids)
         self.index = {rid: i for i, rid in enumerate(self.ids)}

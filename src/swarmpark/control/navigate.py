@@ -1,0 +1,422 @@
+"""Navigation for parking: Dijkstra path, action-point potential field, collision monitor.
+
+As in the 2018 paper (Sect. 3.4), each skid plans a least-cost path on the inflated costmap to
+its assigned goal and the potential field of :mod:`swarmpark.control.apf` drives it along the
+path: the field attracts the skid to a lookahead pose on the path and, near the end, to the
+goal pose itself, which gives the exact parking manoeuvre. Other skids, people and known
+obstacles push the skid away (1/d^3). A collision monitor (as Navigation2's) then simulates
+the command forward over a short horizon and slows or stops the skid before any contact.
+
+Planning happens when the goal changes, when the path becomes blocked, and at most every
+``replan_period_s`` otherwise. Everything is batched over robots except the per-robot plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from scipy.spatial import cKDTree
+
+from ..geometry import (
+    TOUCH_TOLERANCE_M,
+    Footprint,
+    convex_overlap,
+    footprint_corners,
+    rect_disc_gap,
+    transform_points,
+    wrap_angle,
+)
+from ..plan import Costmap, build_costmap, plan_path
+from .apf import arc_length, attraction, forces_to_command, repulsion
+from .base import ControlView
+
+__all__ = ["NavParams", "Navigator"]
+
+
+@dataclass(frozen=True)
+class NavParams:
+    """Tuning of the navigation stack (SI units)."""
+
+    lookahead_m: float = 1.2
+    #: Within this distance of the goal the field attracts the goal pose itself.
+    approach_m: float = 1.5
+    #: The goal force falls linearly inside this distance (2015 paper, extension 3) ...
+    slow_radius_m: float = 1.2
+    #: ... but not below this (m/s), so the skid still creeps into its spot.
+    min_goal_speed_mps: float = 0.06
+    #: Repulsion gains (force in m/s at 1 m is gain * (1 - 1/influence^3)) and reach.
+    k_static: float = 0.004
+    k_robot: float = 0.004
+    k_person: float = 0.008
+    influence_m: float = 0.5
+    #: Near its goal a skid ignores obstacles farther than this (parked neighbours sit there).
+    influence_at_goal_m: float = 0.15
+    replan_period_s: float = 3.0
+    #: Collision monitor: look this far ahead in time, at these fractions of the command.
+    monitor_horizon_s: float = 1.0
+    monitor_samples: int = 5
+    monitor_scales: tuple[float, ...] = (1.0, 0.6, 0.3, 0.0)
+    #: Extra clearance the monitor keeps (m).
+    monitor_margin_m: float = 0.03
+    #: Switch driving end only if the other end's arc is shorter by this factor (hysteresis).
+    switch_ratio: float = 0.75
+    #: Sampling of obstacle outlines for the field.
+    outline_step_m: float = 0.1
+
+
+@dataclass
+class _RobotNav:
+    path: np.ndarray | None = None
+    path_goal: np.ndarray | None = None
+    planned_t: float = -np.inf
+    reverse: bool = False
+    failed: bool = False
+
+
+@dataclass
+class Navigator:
+    """The default controller: plan, follow with the potential field, monitor for collisions."""
+
+    params: NavParams = field(default_factory=NavParams)
+
+    def __post_init__(self) -> None:
+        self._robots: list[_RobotNav] = []
+        self._costmaps: dict[tuple[float, float], Costmap] = {}
+        self._static_pts: np.ndarray | None = None
+        self._static_key: int | None = None
+        self._static_tree = None
+        self._static_kd = None
+
+    # ------------------------------------------------------------------ helpers
+
+    def paths(self) -> list[np.ndarray | None]:
+        """Current planned paths (world points), for display."""
+        return [r.path for r in self._robots]
+
+    def _costmap(self, view: ControlView, fp: Footprint) -> Costmap:
+        key = (round(fp.width_m / 2, 4), round(fp.reach_m, 4))
+        if key not in self._costmaps:
+            self._costmaps[key] = build_costmap(view.grid, key[0], key[1])
+        return self._costmaps[key]
+
+    def _static_points(self, view: ControlView) -> np.ndarray:
+        """Outline points of every known static solid (sampled once)."""
+        key = id(view.static_pieces)
+        if self._static_key != key:
+            pts = []
+            step = self.params.outline_step_m
+            for piece in view.static_pieces:
+                nxt = np.roll(piece, -1, axis=0)
+                for a, b in zip(piece, nxt, strict=True):
+                    n = max(int(np.ceil(np.linalg.norm(b - a) / step)), 1)
+                    pts.append(a + np.linspace(0, 1, n, endpoint=False)[:, None] * (b - a))
+            self._static_pts = np.vstack(pts) if pts else np.zeros((0, 2))
+            self._static_key = key
+            self._static_kd = cKDTree(self._static_pts) if len(self._static_pts) else None
+            lo, hi = view.static_pieces.min(axis=1), view.static_pieces.max(axis=1)
+            self._static_tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        return self._static_pts  # type: ignore[return-value]
+
+    # ------------------------------------------------------------------ planning
+
+    def _update_plans(self, view: ControlView) -> None:
+        p = self.params
+        for i in np.flatnonzero(view.active):
+            nav = self._robots[i]
+            goal = view.goals[i]
+            stale = nav.path_goal is None or np.any(np.abs(nav.path_goal - goal) > 1e-9)
+            due = view.t - nav.planned_t >= p.replan_period_s
+            if not (stale or view.goal_changed[i] or (due and nav.failed)):
+                continue
+            cm = self._costmap(view, view.footprints[i])
+            path = plan_path(cm, view.poses[i, :2], goal[:2])
+            nav.path, nav.path_goal, nav.planned_t = path, goal.copy(), view.t
+            nav.failed = path is None
+            if path is not None:
+                nav.reverse = self._choose_end(view, i, path)
+
+    def _choose_end(self, view: ControlView, i: int, path: np.ndarray) -> bool:
+        """Drive the rear first (reverse) when the goal heading points back along the path's
+        final approach: the skid then backs into its spot (2015 paper, extension 1)."""
+        goal = view.goals[i]
+        if len(path) >= 2 and np.linalg.norm(path[-1] - path[0]) > self.params.approach_m:
+            d = path[-1] - path[-2]
+            approach = np.arctan2(d[1], d[0])
+            return bool(abs(wrap_angle(goal[2] - approach)) > np.pi / 2)
+        return self._shorter_end(view, np.array([i]))[0]
+
+    def _shorter_end(self, view: ControlView, idx: np.ndarray) -> np.ndarray:
+        """True where the rear action point has the shorter arc to the goal."""
+        fps = [view.footprints[i] for i in idx]
+        xf = np.array([f.length_m - f.pivot for f in fps])
+        xr = -np.array([f.pivot for f in fps])
+        pose, goal = view.poses[idx], view.goals[idx]
+        u = np.column_stack([np.cos(pose[:, 2]), np.sin(pose[:, 2])])
+        ug = np.column_stack([np.cos(goal[:, 2]), np.sin(goal[:, 2])])
+        front = arc_length(
+            pose[:, :2] + xf[:, None] * u, goal[:, :2] + xf[:, None] * ug, goal[:, 2]
+        )
+        rear = arc_length(
+            pose[:, :2] + xr[:, None] * u, goal[:, :2] + xr[:, None] * ug, goal[:, 2] + np.pi
+        )
+        return rear < front
+
+    # ------------------------------------------------------------------ targets
+
+    def _targets(self, view: ControlView, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Temporary goal pose per robot (lookahead on the path, or the goal) and whether the
+        robot is in its final approach."""
+        p = self.params
+        targets = view.goals[idx].copy()
+        final = np.ones(len(idx), dtype=bool)
+        for k, i in enumerate(idx):
+            nav = self._robots[i]
+            path = nav.path
+            if path is None or len(path) < 2:
+                continue
+            seg = np.diff(path, axis=0)
+            seg_len = np.linalg.norm(seg, axis=1)
+            cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+            # Project the pivot onto the path.
+            rel = view.poses[i, :2] - path[:-1]
+            t = np.clip(np.einsum("ij,ij->i", rel, seg) / np.maximum(seg_len**2, 1e-12), 0, 1)
+            proj = path[:-1] + t[:, None] * seg
+            j = int(np.argmin(np.linalg.norm(proj - view.poses[i, :2], axis=1)))
+            s_here = cum[j] + t[j] * seg_len[j]
+            remaining = cum[-1] - s_here
+            if remaining <= p.approach_m:
+                continue
+            final[k] = False
+            s_t = min(s_here + p.lookahead_m, cum[-1])
+            m = int(np.clip(np.searchsorted(cum, s_t, side="right") - 1, 0, len(seg) - 1))
+            f = (s_t - cum[m]) / max(seg_len[m], 1e-12)
+            pt = path[m] + f * seg[m]
+            heading = np.arctan2(seg[m, 1], seg[m, 0]) + (np.pi if nav.reverse else 0.0)
+            targets[k] = [pt[0], pt[1], wrap_angle(heading)]
+        return targets, final
+
+    # ------------------------------------------------------------------ the tick
+
+    def compute(self, view: ControlView) -> np.ndarray:
+        p = self.params
+        n = len(view.poses)
+        while len(self._robots) < n:
+            self._robots.append(_RobotNav())
+        cmd = np.zeros((n, 2))
+        idx = np.flatnonzero(view.active)
+        if len(idx) == 0:
+            return cmd
+        self._update_plans(view)
+        fps = view.footprints
+        x_front = np.array([fps[i].length_m - fps[i].pivot for i in idx])
+        x_rear = -np.array([fps[i].pivot for i in idx])
+        half_w = np.array([fps[i].width_m / 2 for i in idx])
+        poses = view.poses[idx]
+        targets, final = self._targets(view, idx)
+
+        # Which end leads: fixed along a path; by the shorter arc (with hysteresis) at the end.
+        reverse = np.array([self._robots[i].reverse for i in idx])
+        if final.any():
+            rear_shorter = self._shorter_end(view, idx[final])
+            cur = reverse[final]
+            fx = np.array([fps[i].length_m - fps[i].pivot for i in idx[final]])
+            xr = -np.array([fps[i].pivot for i in idx[final]])
+            pose_f, goal_f = poses[final], view.goals[idx[final]]
+            u = np.column_stack([np.cos(pose_f[:, 2]), np.sin(pose_f[:, 2])])
+            ug = np.column_stack([np.cos(goal_f[:, 2]), np.sin(goal_f[:, 2])])
+            lf = arc_length(
+                pose_f[:, :2] + fx[:, None] * u, goal_f[:, :2] + fx[:, None] * ug, goal_f[:, 2]
+            )
+            lr = arc_length(
+                pose_f[:, :2] + xr[:, None] * u,
+                goal_f[:, :2] + xr[:, None] * ug,
+                goal_f[:, 2] + np.pi,
+            )
+            switch = np.where(cur, lf < p.switch_ratio * lr, lr < p.switch_ratio * lf)
+            new = np.where(switch, ~cur, cur)
+            new = np.where(np.isnan(lf) | np.isnan(lr), rear_shorter, new)
+            reverse[final] = new
+            for k, i in enumerate(idx[final]):
+                self._robots[i].reverse = bool(new[k])
+
+        # Attraction, weighted by the distance to the (final) goal.
+        dist_goal = np.linalg.norm(view.goals[idx, :2] - poses[:, :2], axis=1)
+        head_err = np.abs(wrap_angle(view.goals[idx, 2] - poses[:, 2]))
+        weight = np.clip(
+            view.max_speed[idx] * (dist_goal + 0.3 * head_err) / p.slow_radius_m,
+            p.min_goal_speed_mps,
+            view.max_speed[idx],
+        )
+        f_goal, x_goal = attraction(poses, targets, x_front, x_rear, reverse, weight)
+
+        # Repulsion from static outlines, other skids' outlines and people.
+        influence = np.where(
+            final & (dist_goal < p.approach_m), p.influence_at_goal_m, p.influence_m
+        )
+        f_front, f_rear = self._repulsion(view, idx, x_front, x_rear, half_w, influence)
+        raw = forces_to_command(f_goal, x_goal, f_front, f_rear, x_front, x_rear)
+
+        # Turn before driving when the wanted direction is far off (the skid can spin in place).
+        rel = np.arctan2(f_goal[:, 1], np.abs(f_goal[:, 0]))
+        raw[:, 0] *= np.clip(np.cos(rel), 0.0, 1.0) ** 2
+        raw[:, 0] = np.clip(raw[:, 0], -view.max_speed[idx], view.max_speed[idx])
+        raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
+        # At the goal position, only turn to the goal heading.
+        cmd[idx] = self._monitor(view, idx, raw)
+        return cmd
+
+    def _outlines(self, view: ControlView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Body-frame outline samples of every skid (cached), their owners, and grown monitor
+        rectangles per skid."""
+        key = tuple(view.footprints)
+        if getattr(self, "_outline_key", None) != key:
+            step, grow = self.params.outline_step_m, self.params.monitor_margin_m
+            pts, owner = [], []
+            for j, fp in enumerate(view.footprints):
+                c = fp.corners_body()
+                for a, b in zip(c, np.roll(c, -1, axis=0), strict=True):
+                    m = max(int(np.ceil(np.linalg.norm(b - a) / step)), 1)
+                    pts.append(a + np.linspace(0, 1, m, endpoint=False)[:, None] * (b - a))
+                    owner.append(np.full(m, j))
+            self._outline_pts = np.vstack(pts)
+            self._outline_owner = np.concatenate(owner)
+            self._grown = np.stack(
+                [
+                    Footprint(
+                        f.length_m + 2 * grow, f.width_m + 2 * grow, f.pivot + grow
+                    ).corners_body()
+                    for f in view.footprints
+                ]
+            )
+            self._outline_key = key
+        return self._outline_pts, self._outline_owner, self._grown
+
+    def _repulsion(self, view, idx, x_front, x_rear, half_w, influence):
+        p = self.params
+        n_act = len(idx)
+        self._static_points(view)
+        body_pts, body_owner, _ = self._outlines(view)
+        # Other skids' outlines in the world, and people (their rims are handled below).
+        robot_pts = transform_points(view.poses[body_owner], body_pts[:, None, :])[:, 0]
+        dyn = np.vstack([robot_pts, view.people_xy])
+        dyn_owner = np.concatenate([body_owner, np.full(len(view.people_xy), -2)])
+        reach = np.array([view.footprints[i].reach_m for i in idx]) + influence
+        rob_l, pt_l, src_l = [], [], []
+        if self._static_kd is not None:
+            hits = self._static_kd.query_ball_point(view.poses[idx, :2], reach)
+            lens = np.fromiter((len(h) for h in hits), int, len(hits))
+            if lens.sum():
+                rob_l.append(np.repeat(np.arange(n_act), lens))
+                pt_l.append(np.concatenate([np.asarray(h, int) for h in hits if len(h)]))
+                src_l.append(np.zeros(lens.sum(), int))
+        if len(dyn):
+            rim = view.people_radius.max(initial=0.0)
+            hits = cKDTree(dyn).query_ball_point(view.poses[idx, :2], reach + rim)
+            lens = np.fromiter((len(h) for h in hits), int, len(hits))
+            if lens.sum():
+                rob_l.append(np.repeat(np.arange(n_act), lens))
+                pt_l.append(np.concatenate([np.asarray(h, int) for h in hits if len(h)]))
+                src_l.append(np.ones(lens.sum(), int))
+        if not rob_l:
+            z = np.zeros((n_act, 2))
+            return z, z.copy()
+        rob, pt, src = np.concatenate(rob_l), np.concatenate(pt_l), np.concatenate(src_l)
+        is_dyn = src == 1
+        owner = np.where(is_dyn, dyn_owner[np.where(is_dyn, pt, 0)], -1)
+        keep = owner != idx[rob]
+        rob, pt, is_dyn, owner = rob[keep], pt[keep], is_dyn[keep], owner[keep]
+        world = np.where(
+            is_dyn[:, None], dyn[np.where(is_dyn, pt, 0)], self._static_pts[np.where(is_dyn, 0, pt)]
+        )
+        gain = np.where(owner == -1, p.k_static, np.where(owner == -2, p.k_person, p.k_robot))
+        pose = view.poses[idx[rob]]
+        d = world - pose[:, :2]
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        body = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+        person = owner == -2
+        if person.any():
+            # A person's rim is closer than the centre by the radius: move the point inwards.
+            rad = view.people_radius[pt[person] - len(robot_pts)]
+            nrm = np.linalg.norm(body[person], axis=1, keepdims=True)
+            body[person] *= np.maximum(1 - rad[:, None] / np.maximum(nrm, 1e-9), 0.0)
+        front, rear, _ = repulsion(
+            rob, body, gain, x_rear[rob], x_front[rob], half_w[rob], influence[rob]
+        )
+        out_f, out_r = np.zeros((n_act, 2)), np.zeros((n_act, 2))
+        out_f[: len(front)] = front
+        out_r[: len(rear)] = rear
+        return out_f, out_r
+
+    def _monitor(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
+        """Scale each command down until its short forward simulation is collision-free."""
+        p = self.params
+        n_act = len(idx)
+        scales = np.asarray(p.monitor_scales)
+        times = np.linspace(
+            p.monitor_horizon_s / p.monitor_samples, p.monitor_horizon_s, p.monitor_samples
+        )
+        fps = view.footprints
+        grow = p.monitor_margin_m
+        body = self._outlines(view)[2][idx]
+        # Poses for every (robot, scale, time): constant (v, omega) arcs from the current pose.
+        v = raw[:, 0][:, None, None] * scales[None, :, None]
+        w = np.broadcast_to(raw[:, 1][:, None, None], v.shape)
+        t = times[None, None, :]
+        th0 = view.poses[idx, 2][:, None, None]
+        straight = np.abs(w) < 1e-9
+        ws = np.where(straight, 1.0, w)
+        dx = np.where(straight, v * t * np.cos(th0), v / ws * (np.sin(th0 + w * t) - np.sin(th0)))
+        dy = np.where(straight, v * t * np.sin(th0), -v / ws * (np.cos(th0 + w * t) - np.cos(th0)))
+        S, T = len(scales), len(times)
+        pose = np.stack(
+            [
+                view.poses[idx, 0][:, None, None] + dx,
+                view.poses[idx, 1][:, None, None] + dy,
+                np.broadcast_to(th0 + w * t, dx.shape),
+            ],
+            -1,
+        ).reshape(-1, 3)
+        owner = np.repeat(np.arange(n_act), S * T)
+        corners = footprint_corners(pose, np.repeat(body, S * T, axis=0))
+        bad = np.zeros(len(pose), dtype=bool)
+
+        # Static solids.
+        self._static_points(view)
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        qi, si = self._static_tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        if len(qi):
+            hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
+            bad[qi[hit]] = True
+        # Other skids where they are now (they run their own monitor).
+        others = footprint_corners(view.poses, np.stack([f.corners_body() for f in fps]))
+        centers = others.mean(axis=1)
+        tree = cKDTree(centers)
+        radius = max(f.circumradius_m for f in fps) * 2 + grow
+        cand = tree.query_ball_point(corners.mean(axis=1), radius)
+        qa = np.concatenate([np.full(len(c), k) for k, c in enumerate(cand)]).astype(int)
+        qb = np.concatenate([np.asarray(c, dtype=int) for c in cand]).astype(int)
+        keep = qb != idx[owner[qa]]
+        qa, qb = qa[keep], qb[keep]
+        if len(qa):
+            hit = convex_overlap(corners[qa], others[qb]) > TOUCH_TOLERANCE_M
+            bad[qa[hit]] = True
+        # People, moving on with their current velocity.
+        if len(view.people_xy):
+            tt = np.tile(np.repeat(times, 1), n_act * S)
+            for k in range(len(view.people_xy)):
+                centre = view.people_xy[k] + view.people_vel[k] * tt[:, None]
+                gap = rect_disc_gap(corners, centre, np.full(len(corners), view.people_radius[k]))
+                bad |= gap < 0
+        bad = bad.reshape(n_act, S, T)
+        # A scale is safe if none of its samples collides; also stop turning if nothing is safe.
+        safe = ~bad.any(axis=2)
+        # Samples that already collide at scale 0 (e.g. a neighbour inside our margin) cannot be
+        # cured by slowing: judge those robots only on whether moving makes it worse.
+        stuck_now = bad[:, -1, :].any(axis=1)
+        first_safe = np.where(safe.any(axis=1), np.argmax(safe, axis=1), S - 1)
+        out = raw.copy()
+        out[:, 0] *= scales[first_safe]
+        out[stuck_now, 0] = raw[stuck_now, 0] * 0.3
+        return out
