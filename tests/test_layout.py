@@ -12,8 +12,11 @@ from hypothesis import strategies as st
 from shapely.geometry import Polygon, box
 
 from swarmpark.geometry import Footprint, GeometryError, footprint_polygon
-from swarmpark.layout import METHODS, LayoutError, candidate_headings, capacity, layout
+from swarmpark.layout import METHODS as ALL_METHODS
+from swarmpark.layout import LayoutError, candidate_headings, capacity, layout
 from swarmpark.layout.validate import check_layout
+
+METHODS = ("stacking", "potential")  # methods implemented so far
 
 SQUARE4 = [[0, 0], [4, 0], [4, 4], [0, 4]]
 L_SHAPE = [[0, 0], [12, 0], [12, 4], [4, 4], [4, 10], [0, 10]]
@@ -103,17 +106,19 @@ def test_heading_rotates_the_grid():
     assert res90.heading == pytest.approx(math.pi / 2)
 
 
+@pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("shape", [L_SHAPE, U_SHAPE], ids=["L", "U"])
-def test_non_convex_boundaries(shape):
-    res = layout(shape, [SKID] * 20)
+def test_non_convex_boundaries(shape, method):
+    res = layout(shape, [SKID] * 20, method=method)
     independent_check(res, [SKID] * 20, shape, 0.3)
-    assert res.report["egress_ok"]
+    assert res.report["egress_ok"] and res.method == method
 
 
-def test_obstacle_inside_boundary_is_avoided():
+@pytest.mark.parametrize("method", METHODS)
+def test_obstacle_inside_boundary_is_avoided(method):
     outer = [[0, 0], [8, 0], [8, 6], [0, 6]]
     pillar = box(3.0, 2.0, 5.0, 4.0)
-    res = layout(outer, [SKID] * 12, obstacles=pillar)
+    res = layout(outer, [SKID] * 12, obstacles=pillar, method=method)
     independent_check(res, [SKID] * 12, outer, 0.3, obstacles=pillar)
     # Fewer fit than without the pillar.
     assert (
@@ -144,9 +149,10 @@ def test_line_obstacle_splits_region():
     assert info.value.fits == 4
 
 
-def test_mixed_footprints():
+@pytest.mark.parametrize("method", METHODS)
+def test_mixed_footprints(method):
     fps = [Footprint(1.2, 0.8), Footprint(2.0, 1.0), Footprint(0.8, 0.6), Footprint(2.0, 1.0)] * 3
-    res = layout(L_SHAPE, fps)
+    res = layout(L_SHAPE, fps, method=method)
     independent_check(res, fps, L_SHAPE, 0.3)
     assert res.poses.shape == (12, 3)
 
@@ -279,4 +285,91 @@ def test_property_stacking_valid_or_clear_error(boundary, n, length, width, head
 
 
 def test_methods_are_the_three_of_the_papers():
-    assert METHODS == ("stacking", "potential", "convex")
+    assert ALL_METHODS == ("stacking", "potential", "convex")
+
+
+# --- potential field -------------------------------------------------------------------------
+
+
+def nearest_gaps(res, fp):
+    """Nearest-neighbour gap of each goal (plain shapely)."""
+    polys = [footprint_polygon(p, fp) for p in res.poses]
+    return np.array(
+        [min(a.distance(b) for j, b in enumerate(polys) if j != i) for i, a in enumerate(polys)]
+    )
+
+
+def test_potential_spreads_the_stacking_goals():
+    room = [[0, 0], [12, 0], [12, 9], [0, 9]]
+    st = layout(room, [SKID] * 30)
+    pf = layout(room, [SKID] * 30, method="potential")
+    independent_check(pf, [SKID] * 30, room, 0.3)
+    # Stacking packs every goal against a neighbour; the field opens the formation up.
+    np.testing.assert_allclose(nearest_gaps(st, SKID), 0.3, atol=1e-9)
+    assert nearest_gaps(pf, SKID).mean() > 0.35
+    rep = pf.report
+    assert rep["variant"] == "centroid" and rep["converged"]
+    assert rep["energy_final"] < rep["energy_initial"]
+    assert 0 < rep["iterations"] <= 300
+    # The spread reaches the far side of the room, which stacking leaves empty.
+    assert pf.poses[:, 0].max() > 10.0 > st.poses[:, 0].max()
+
+
+def test_potential_vertex_variant_for_mixed_sizes():
+    fps = [Footprint(1.2, 0.8), Footprint(2.0, 1.0), Footprint(0.8, 0.6)] * 4
+    room = [[0, 0], [12, 0], [12, 9], [0, 9]]
+    res = layout(room, fps, method="potential")
+    assert res.report["variant"] == "vertex"
+    assert res.report["energy_final"] < res.report["energy_initial"]
+    independent_check(res, fps, room, 0.3)
+
+
+def test_potential_iteration_cap_is_reported():
+    from swarmpark.layout import potential, stacking
+    from swarmpark.layout.region import make_region, make_skids
+
+    region = make_region([[0, 0], [12, 0], [12, 9], [0, 9]], None, 0.0, 0.3)
+    skids = make_skids([SKID] * 20)
+    start = stacking.stack(region, skids).centres
+    centres, info = potential.spread(region, skids, start, max_iterations=3)
+    assert info["iterations"] == 3 and not info["converged"]
+    assert "iteration cap 3" in info["notices"][0]
+    _, info_v = potential.spread(region, skids, start, variant="vertex", max_iterations=5)
+    assert info_v["variant"] == "vertex" and info_v["energy_final"] < info_v["energy_initial"]
+    with pytest.raises(ValueError, match="variant"):
+        potential.spread(region, skids, start, variant="edges")
+
+
+def test_potential_energy_terms_by_hand():
+    from swarmpark.layout.potential import local_terms, total_energy
+
+    centres = np.array([[0.0, 0.0], [3.0, 4.0]])
+    half = np.array([[0.5, 0.5], [0.5, 0.5]])
+    bpts = np.array([[0.0, -1.0], [0.0, -10.0]])  # the second is beyond the threshold
+    pair, bnd, force = local_terms(
+        centres, centres, half, bpts, variant="centroid", threshold_m=2.0, boundary_weight=1.0
+    )
+    np.testing.assert_allclose(pair, [0.2, 0.2])  # 1 / 5
+    np.testing.assert_allclose(bnd, [1.0 - 0.5, 0.0])  # 1/d - 1/threshold, d = 1
+    assert total_energy(pair, bnd) == pytest.approx(0.2 + 0.5)
+    # Force on goal 0: away from goal 1, (-3, -4) / 125, plus (0, 1) / 1 from the point.
+    np.testing.assert_allclose(force[0], [-3 / 125, -4 / 125 + 1.0])
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    boundary=star_polygons(),
+    n=st.integers(1, 10),
+    length=st.floats(0.5, 2.0),
+    width=st.floats(0.4, 1.2),
+    heading=st.floats(-np.pi, np.pi),
+    margin=st.floats(0.0, 0.5),
+)
+def test_property_potential_valid_or_clear_error(boundary, n, length, width, heading, margin):
+    fp = Footprint(length, width)
+    try:
+        res = layout(boundary, [fp] * n, heading=heading, margin_m=margin, method="potential")
+    except LayoutError as exc:
+        assert exc.fits is not None and exc.fits < n
+        return
+    independent_check(res, [fp] * n, boundary, margin)

@@ -1,0 +1,278 @@
+"""Potential-field layout (Hing et al. 2018, Sect. 3.2.2, eqs. 1-4).
+
+Starting from the stacking goals, each goal is a floating point repelled by every other goal
+(``1/d``, eq. 3) and by the discretized boundary points within a distance threshold
+(``1/d``, eq. 2); the goals follow the force ``-grad U`` (eq. 4) until the total energy
+(eq. 1) changes by less than a tolerance or an iteration cap is hit.
+
+Two variants, as in the paper's Fig. 5:
+
+- ``"centroid"``: distances between goal centroids, and centroid to boundary points.
+- ``"vertex"``: distances between the rectangles' vertices (and vertex to boundary point);
+  the forces on a rectangle's vertices add up to the force on its centroid. This lets the
+  field see the size of each skid, which matters for mixed footprints.
+
+Departures from the paper, for a layout that is always valid and a loop that terminates:
+
+- The boundary term is shifted, ``1/d - 1/threshold``, so the energy is continuous at the
+  threshold (the force, ``1/d^2``, is the paper's). The paper does not weight the boundary
+  against the goals; here each boundary point weighs ``spacing / pitch`` of a goal, so a
+  wall pushes like a row of goals at the skids' pitch whatever the discretization.
+- Each goal moves along its force by its own adaptive step (a plain common gradient step
+  stalls: the goal with the largest force, pressed against a wall, sets the scale for all).
+  A move is kept only if it lowers that goal's energy, keeps its footprint in the free
+  region with the margin and keeps the margin to the other goals; otherwise the goal stays
+  (rejected) and its step is halved. An iteration that raises the total energy is undone.
+  So every iterate is a valid layout and the energy never rises.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+from swarmpark.layout.region import Region, Skids
+
+__all__ = ["VARIANTS", "spread", "boundary_points", "local_terms", "total_energy"]
+
+VARIANTS = ("centroid", "vertex")
+#: Iteration cap (the paper's "set number of iterations").
+MAX_ITERATIONS = 300
+#: Stop when the total energy has changed by less than this fraction of it in each of
+#: ``ENERGY_PATIENCE`` consecutive iterations (single small steps happen while the goals'
+#: step lengths adapt, so one small change is not yet a minimum).
+ENERGY_RTOL = 1e-5
+ENERGY_PATIENCE = 10
+#: Boundary discretization: points per skid width (and at most this spacing, metres).
+BOUNDARY_POINTS_PER_WIDTH = 4
+MAX_BOUNDARY_SPACING_M = 0.25
+#: First and smallest step of each goal (fractions of the narrowest skid width), and the
+#: growth after a kept move (a rejected move halves the step; the largest is one width).
+INITIAL_STEP_FRACTION = 0.25
+MIN_STEP_FRACTION = 1e-3
+STEP_GROWTH = 1.25
+#: A pair closer than the margin by more than this is a conflict (round-off allowance).
+_GAP_TOL_M = 1e-9
+#: Parts of a move tried in turn: the whole move, then its x part, then its y part.
+_MOVE_PARTS = (np.array([1.0, 1.0]), np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+#: Rectangle corners as multiples of the half size (vertex variant), counter-clockwise.
+_CORNER_SIGNS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
+def boundary_points(region: Region, spacing_m: float) -> np.ndarray:
+    """Points ``(M, 2)`` along the free region's edge (boundary, walls, obstacles)."""
+    edge = shapely.segmentize(region.free.boundary, spacing_m)
+    pts = shapely.get_coordinates(edge)
+    return np.unique(pts, axis=0)
+
+
+def _points(centres: np.ndarray, half: np.ndarray, variant: str) -> np.ndarray:
+    """Repelling points of each skid ``(N, K, 2)``: its centroid, or its four vertices."""
+    if variant == "centroid":
+        return centres[:, None, :]
+    return centres[:, None, :] + _CORNER_SIGNS[None] * half[:, None, :]
+
+
+def local_terms(
+    moving: np.ndarray,
+    others: np.ndarray,
+    half: np.ndarray,
+    bpts: np.ndarray,
+    *,
+    variant: str,
+    threshold_m: float,
+    boundary_weight: float,
+    rows: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Energy and force of skid ``i`` at ``moving[i]`` against all others at ``others``.
+
+    Returns ``(pair, boundary, force)``: the skid's goal-goal energy (eq. 3) summed over the
+    others, its boundary energy (eq. 2), both ``(R,)``, and the force ``-grad U`` on it
+    ``(R, 2)`` (eq. 4). ``rows`` (indices, default all) selects the skids evaluated;
+    ``moving`` then holds only those rows. In the vertex variant, pair terms are averaged
+    over the 16 vertex pairs and boundary terms over the 4 vertices, so the variants are on
+    one scale.
+    """
+    n = len(others)
+    rows = np.arange(n) if rows is None else np.asarray(rows)
+    p = _points(moving, half[rows], variant)  # (R, K, 2)
+    q = _points(others, half, variant)  # (N, K, 2)
+    r, k = p.shape[:2]
+    px, py = p[..., 0].reshape(-1, 1), p[..., 1].reshape(-1, 1)  # (R*K, 1)
+    dx = px - q[..., 0].reshape(1, -1)  # (R*K, N*K)
+    dy = py - q[..., 1].reshape(1, -1)
+    dist = np.sqrt(dx * dx + dy * dy)
+    # A skid does not repel itself: infinite distance, zero energy and force.
+    self_cols = np.repeat(rows, k)[:, None] * k + np.arange(k)[None, :]  # (R*K, K)
+    dist[np.repeat(np.arange(r * k), k), self_cols.ravel()] = np.inf
+    inv = 1.0 / dist
+    pair_scale = 1.0 / (k * k)
+    inv3 = inv * inv * inv
+    pair = pair_scale * inv.sum(axis=1).reshape(r, k).sum(axis=1)
+    fx = (inv3 * dx).sum(axis=1)
+    fy = (inv3 * dy).sum(axis=1)
+    force = pair_scale * np.column_stack([fx, fy]).reshape(r, k, 2).sum(axis=1)
+
+    boundary = np.zeros(r)
+    if len(bpts):
+        bx = px - bpts[None, :, 0]  # (R*K, M)
+        by = py - bpts[None, :, 1]
+        bdist = np.sqrt(bx * bx + by * by)
+        far = bdist >= threshold_m
+        bdist[far] = np.inf
+        binv = 1.0 / bdist
+        b_scale = boundary_weight / k
+        shifted = binv - np.where(far, 0.0, 1.0 / threshold_m)
+        boundary = b_scale * shifted.sum(axis=1).reshape(r, k).sum(axis=1)
+        binv3 = binv * binv * binv
+        bf = np.column_stack([(binv3 * bx).sum(axis=1), (binv3 * by).sum(axis=1)])
+        force = force + b_scale * bf.reshape(r, k, 2).sum(axis=1)
+    return pair, boundary, force
+
+
+def total_energy(pair: np.ndarray, boundary: np.ndarray) -> float:
+    """Eq. 1 from the per-skid terms of :func:`local_terms` (each pair counted once)."""
+    return float(0.5 * pair.sum() + boundary.sum())
+
+
+def _resolve(region: Region, half: np.ndarray, old: np.ndarray, prop: np.ndarray, moved):
+    """Positions after rejecting moves that leave the region or come within the margin.
+
+    Returns the positions and the mask of moves kept.
+    """
+    moved = moved.copy()
+    idx = np.flatnonzero(moved)
+    moved[idx] = region.inside(prop[idx], half[idx])
+    limit = region.margin - _GAP_TOL_M
+    while True:
+        cur = np.where(moved[:, None], prop, old)
+        idx = np.flatnonzero(moved)
+        if len(idx) == 0:
+            return cur, moved
+        # Gaps of the moved footprints to all others (axis-aligned rectangles).
+        d = np.abs(cur[idx, None, :] - cur[None, :, :]) - (half[idx, None, :] + half[None, :, :])
+        gaps = np.hypot(np.maximum(d[..., 0], 0.0), np.maximum(d[..., 1], 0.0))
+        gaps[np.arange(len(idx)), idx] = np.inf
+        revert = (gaps < limit).any(axis=1)
+        if not revert.any():
+            return cur, moved
+        moved[idx[revert]] = False
+
+
+def spread(
+    region: Region,
+    skids: Skids,
+    centres: np.ndarray,
+    *,
+    variant: str = "auto",
+    max_iterations: int = MAX_ITERATIONS,
+    energy_rtol: float = ENERGY_RTOL,
+    threshold_m: float | None = None,
+) -> tuple[np.ndarray, dict]:
+    """Spread a valid layout by the potential field.
+
+    Each iteration, every goal proposes a move of its own step length along its force; a
+    move is kept if it lowers that goal's energy (others held where they were), keeps the
+    footprint in the free region with the margin and keeps the margin to the other goals
+    (after their moves). Kept moves lengthen that goal's step, rejected ones halve it.
+
+    Parameters
+    ----------
+    region, skids
+        Layout-frame region and the footprints.
+    centres
+        ``(N, 2)`` valid starting centres (the stacking layout).
+    variant
+        ``"centroid"``, ``"vertex"``, or ``"auto"``: centroid for one footprint size,
+        vertex for mixed sizes.
+    max_iterations
+        Iteration cap.
+    energy_rtol
+        Stop when the total energy changes by less than this fraction in an iteration.
+    threshold_m
+        Boundary points farther than this do not act (eq. 2). Default: the largest skid
+        pitch (length + margin).
+
+    Returns
+    -------
+    centres, info
+        Final centres and a dict with ``variant``, ``iterations``, ``energy_initial``,
+        ``energy_final``, ``converged``, ``notices``.
+    """
+    if variant == "auto":
+        variant = "centroid" if skids.uniform else "vertex"
+    if variant not in VARIANTS:
+        raise ValueError(f"potential variant must be one of {VARIANTS} or 'auto' (got {variant!r})")
+    half = skids.half
+    n = len(half)
+    c = np.asarray(centres, dtype=float).copy()
+    width = 2.0 * float(half.min())
+    pitch = float(
+        np.sqrt(np.mean((2 * half[:, 0] + region.margin) * (2 * half[:, 1] + region.margin)))
+    )
+    spacing = min(width / BOUNDARY_POINTS_PER_WIDTH, MAX_BOUNDARY_SPACING_M)
+    bpts = boundary_points(region, spacing)
+    thr = float(threshold_m) if threshold_m is not None else float(2 * half.max() + region.margin)
+    params = dict(variant=variant, threshold_m=thr, boundary_weight=spacing / pitch)
+
+    pair, bnd, force = local_terms(c, c, half, bpts, **params)
+    energy = total_energy(pair, bnd)
+    e0 = energy
+    steps = np.full(n, INITIAL_STEP_FRACTION * width)
+    min_step = MIN_STEP_FRACTION * width
+    max_step = width
+    converged = False
+    quiet = 0  # consecutive iterations with a small energy change
+    it = 0
+    while it < max_iterations:
+        it += 1
+        norm = np.linalg.norm(force, axis=1)
+        active = norm > 0
+        if not active.any():
+            converged = True
+            break
+        direction = force / np.where(norm > 0, norm, 1.0)[:, None]
+        new, kept = c, np.zeros(n, dtype=bool)
+        # The full move first; where it is blocked, its x or y part alone (footprints are
+        # axis-aligned here, so this projects the move onto the wall or neighbour it hit).
+        for axes in _MOVE_PARTS:
+            todo = active & ~kept
+            if not todo.any():
+                break
+            rows = np.flatnonzero(todo)
+            prop = new.copy()
+            prop[rows] += steps[rows, None] * direction[rows] * axes
+            p_pair, p_bnd, _ = local_terms(prop[rows], c, half, bpts, rows=rows, **params)
+            downhill = np.zeros(n, dtype=bool)
+            downhill[rows] = p_pair + p_bnd < pair[rows] + bnd[rows]
+            new, moved = _resolve(region, half, new, prop, downhill)
+            kept |= moved
+        # A blocked goal keeps trying with a short step: as the others move away, its force
+        # may turn to a direction it can move in.
+        steps = np.where(kept, np.minimum(steps * STEP_GROWTH, max_step), steps * 0.5)
+        steps = np.maximum(steps, min_step)
+        drop = 0.0
+        if kept.any():
+            n_pair, n_bnd, n_force = local_terms(new, new, half, bpts, **params)
+            e_new = total_energy(n_pair, n_bnd)
+            if e_new < energy:
+                drop = energy - e_new
+                c, pair, bnd, force, energy = new, n_pair, n_bnd, n_force, e_new
+            else:
+                # Simultaneous moves can interfere: undo, and retry with shorter steps.
+                steps = np.where(kept, steps * 0.25, steps)
+        quiet = quiet + 1 if drop < energy_rtol * abs(energy) else 0
+        if quiet >= ENERGY_PATIENCE:
+            converged = True
+            break
+    info = {
+        "variant": variant,
+        "iterations": it,
+        "energy_initial": e0,
+        "energy_final": energy,
+        "converged": converged,
+        "boundary_points": len(bpts),
+        "threshold_m": thr,
+        "notices": [] if converged else [f"potential: iteration cap {max_iterations} reached"],
+    }
+    return c, info
