@@ -38,9 +38,14 @@ MIN_WAYPOINT_SPACING_M = 1e-9
 #: round-off for any sensible spline.
 _SUBINTERVALS = 16
 _GL_NODES = 8
-#: A spline whose speed |r'(u)| drops below this fraction of the mean has (nearly) a cusp:
-#: its heading and curvature are undefined there.
-_CUSP_RATIO = 1e-6
+#: Newton steps that polish the inverse arc length s -> u (quadratic convergence from the
+#: Hermite estimate: two reach round-off on any path that passes the cusp check).
+_NEWTON_STEPS = 2
+#: A spline whose speed |r'(u)| drops below this fraction of its mean has a cusp or a hairpin
+#: turn (turning radius about ratio^2 times the waypoint spacing): its heading flips there,
+#: no skid can follow it, and the arc-length table loses accuracy. Waypoints that double back
+#: on themselves do this.
+_CUSP_RATIO = 0.1
 
 
 class PathError(ValueError):
@@ -83,6 +88,21 @@ def _check_heading(value, field_name: str) -> float | None:
     return h
 
 
+def _min_speed(d1) -> float:
+    """Exact minimum of ``|r'(u)|`` for a piecewise-quadratic derivative ``d1`` (a PPoly)."""
+    c = d1.c  # (3, intervals, 2): highest power first, local variable t = u - x[k]
+    widths = np.diff(d1.x)
+    best = np.inf
+    for k, h in enumerate(widths):
+        # |r'|^2 is a quartic; its extremes are at the real roots of its derivative.
+        quartic = np.polyadd(np.polymul(c[:, k, 0], c[:, k, 0]), np.polymul(c[:, k, 1], c[:, k, 1]))
+        crit = np.roots(np.polyder(quartic)) if np.any(quartic[:-1]) else np.array([])
+        crit = crit[np.abs(crit.imag) < 1e-12].real
+        t = np.concatenate([[0.0, h], crit[(crit > 0) & (crit < h)]])
+        best = min(best, float(np.sqrt(max(np.polyval(quartic, t).min(), 0.0))))
+    return best
+
+
 @dataclass(frozen=True, eq=False)
 class SplinePath:
     """A planar cubic-spline path parameterized by arc length ``s`` in ``[0, length_m]``.
@@ -108,6 +128,10 @@ class SplinePath:
     knot_s: np.ndarray = field(init=False, repr=False)
     _spline: CubicSpline = field(init=False, repr=False)
     _u_of_s: CubicHermiteSpline = field(init=False, repr=False)
+    _d1: object = field(init=False, repr=False)
+    _ub: np.ndarray = field(init=False, repr=False)
+    _sb: np.ndarray = field(init=False, repr=False)
+    _gl: tuple = field(init=False, repr=False)
 
     @classmethod
     def through(
@@ -176,13 +200,19 @@ class SplinePath:
         sb = np.concatenate([[0.0], np.cumsum(seg)])
         speed_b = np.linalg.norm(d1(ub), axis=-1)
         mean_speed = sb[-1] / u[-1]
-        if min(speed_b.min(), speed_q.min()) < _CUSP_RATIO * mean_speed:
+        ratio = _min_speed(d1) / mean_speed
+        if ratio < _CUSP_RATIO:
             raise PathError(
-                f"{_field_name}: the spline through these waypoints has a cusp "
-                f"(zero speed); spread the waypoints more evenly ({pts.tolist()})"
+                f"{_field_name}: the spline through these waypoints doubles back (a cusp or "
+                f"hairpin: its speed drops to {ratio:.2%} of the mean); add or move waypoints "
+                f"({pts.tolist()})"
             )
         set_(self, "_spline", spline)
+        set_(self, "_d1", d1)
         set_(self, "_u_of_s", CubicHermiteSpline(sb, ub, 1.0 / speed_b))
+        set_(self, "_ub", ub)
+        set_(self, "_sb", sb)
+        set_(self, "_gl", (nodes, weights))
         set_(self, "length_m", float(sb[-1]))
         knot_s = sb[::_SUBINTERVALS].copy()
         knot_s.setflags(write=False)
@@ -193,7 +223,23 @@ class SplinePath:
         s = np.asarray(s, dtype=float)
         if not np.all(np.isfinite(s)):
             raise PathError(f"s: arc lengths must be finite (got {s!r})")
-        return self._u_of_s(np.clip(s, 0.0, self.length_m))
+        s = np.clip(s, 0.0, self.length_m)
+        u = self._u_of_s(s)
+        # Polish with Newton steps on the exact arc length (quadrature from the tabulated
+        # breakpoint below), kept inside the breakpoint bracket: the Hermite inverse alone
+        # loses accuracy where the speed |r'(u)| varies fast (tight turns).
+        ub, sb = self._ub, self._sb
+        k = np.clip(np.searchsorted(sb, s, side="right") - 1, 0, sb.size - 2)
+        lo, hi = ub[k], ub[k + 1]
+        nodes, weights = self._gl
+        for _ in range(_NEWTON_STEPS):
+            u = np.clip(u, lo, hi)
+            half = 0.5 * (u - lo)
+            uq = (lo + half)[..., None] + half[..., None] * nodes
+            arc = sb[k] + half * np.sum(weights * np.linalg.norm(self._d1(uq), axis=-1), axis=-1)
+            speed = np.linalg.norm(self._d1(u), axis=-1)
+            u = u - (arc - s) / speed
+        return np.clip(u, lo, hi)
 
     def position(self, s) -> np.ndarray:
         """Points ``(..., 2)`` at arc lengths ``s``."""
