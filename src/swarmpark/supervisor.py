@@ -13,7 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from shapely.geometry import Polygon
+import shapely
+import shapely.ops
+from shapely.geometry import LineString, Polygon
 from shapely.ops import unary_union
 
 from . import assign as assign_mod
@@ -60,6 +62,8 @@ class ParkGroup:
     boundary: Polygon
     method: str
     report: dict
+    #: blocks[k]: goals whose access corridor from the opening crosses goal k.
+    blocks: tuple[tuple[int, ...], ...] = ()
     switches: int = 0
 
 
@@ -241,6 +245,53 @@ class Supervisor:
             goals=np.round(goals[goal_of], 4).tolist(),
         )
 
+    def _blockers(self, goals: np.ndarray, fps, opening) -> tuple[tuple[int, ...], ...]:
+        """For each goal k, the goals j whose straight access corridor (from the opening, one
+        skid wide) crosses goal k's footprint: k must stay free until those are filled."""
+        from .geometry import footprint_polygon, pivot_to_center
+
+        if opening is None or len(goals) < 2:
+            return tuple(() for _ in goals)
+        polys = [footprint_polygon(g, f) for g, f in zip(goals, fps, strict=True)]
+        centers = pivot_to_center(goals, np.array([f.center_offset_m for f in fps]))
+        half = max(f.width_m for f in fps) / 2
+        corridors = [LineString([tuple(opening), tuple(c)]).buffer(half) for c in centers]
+        out = []
+        for k, pk in enumerate(polys):
+            inner = pk.buffer(-1e-6)
+            out.append(
+                tuple(
+                    j
+                    for j, cj in enumerate(corridors)
+                    if j != k
+                    and cj.intersects(inner)
+                    and not polys[j].buffer(-1e-6).intersects(corridors[k])
+                )
+            )
+        return tuple(out)
+
+    def held(self) -> np.ndarray:
+        """Robots that must wait outside their boundary: their goal would block a deeper goal
+        that is not filled yet (deepest goals first, 2018 Fig. 6)."""
+        hold = np.zeros(self.sim.n, dtype=bool)
+        for g in self.groups:
+            if not g.blocks or not any(g.blocks):
+                continue
+            pos_err, head_err = goal_errors(self.sim.poses[g.robots], g.goals[g.goal_of])
+            parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+            filled = np.zeros(len(g.goals), dtype=bool)
+            filled[g.goal_of[parked]] = True
+            for r, k in zip(g.robots, g.goal_of, strict=True):
+                hold[r] = any(not filled[j] for j in g.blocks[k])
+        return hold
+
+    def hold_zones(self) -> list:
+        zones: list = [None] * self.sim.n
+        for g in self.groups:
+            for r in g.robots:
+                zones[r] = g.boundary
+        return zones
+
     def _cost_matrix(self, idx: np.ndarray, goals: np.ndarray, cost: str, fits) -> np.ndarray:
         lengths = None
         if cost == "path":
@@ -419,6 +470,8 @@ class Supervisor:
             people_radius=sim.person_radius,
             static_pieces=sim.static_pieces,
             goal_changed=self.goal_changed.copy(),
+            hold=self.held(),
+            hold_zones=tuple(self.hold_zones()),
         )
 
     def _people_walking(self) -> np.ndarray:
@@ -444,7 +497,8 @@ class Supervisor:
         hold = np.full(self.sim.n, self.estopped)
         step = self.sim.step(cmd, hold=hold)
         self._last_cmd = cmd
-        paused = self.stopped | self.teleop | self.estopped
+        # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
+        paused = self.stopped | self.teleop | self.estopped | view.hold
         self.metrics.on_step(
             self.sim.t,
             self.sim.poses,

@@ -37,6 +37,8 @@ class ControlView:
     people_radius: np.ndarray  # (P,)
     static_pieces: np.ndarray  # (S, 4, 2) known static solids
     goal_changed: np.ndarray  # (N,) bool: the goal was set or changed this tick
+    hold: np.ndarray | None = None  # (N,) bool: wait outside hold_zones[i] (fill order)
+    hold_zones: tuple = ()  # per robot: shapely Polygon (its parking boundary) or None
 
 
 class Controller(Protocol):

@@ -62,6 +62,23 @@ class NavParams:
     monitor_margin_m: float = 0.03
     #: Switch driving end only if the other end's arc is shorter by this factor (hysteresis).
     switch_ratio: float = 0.75
+    #: Docking: within this distance of the goal, align the heading and close the remaining
+    #: distance straight along the goal heading (if the lateral error allows it).
+    dock_radius_m: float = 0.3
+    dock_lateral_m: float = 0.07
+    #: Gain of the goal-axis tracking law (rad of aim per m of lateral error, via atan).
+    k_lateral: float = 3.0
+    #: Otherwise back out to this run-up distance along the goal heading and come in again.
+    runup_m: float = 0.9
+    #: A docked skid holds still inside these errors and resumes beyond the outer ones.
+    parked_pos_m: float = 0.03
+    parked_yaw_rad: float = np.deg2rad(1.5)
+    resume_pos_m: float = 0.09
+    resume_yaw_rad: float = np.deg2rad(4.0)
+    k_dock: float = 1.0
+    k_dock_yaw: float = 1.5
+    #: Skids held back by the fill order wait this far outside their parking boundary.
+    hold_gap_m: float = 1.0
     #: Sampling of obstacle outlines for the field.
     outline_step_m: float = 0.1
 
@@ -73,6 +90,8 @@ class _RobotNav:
     planned_t: float = -np.inf
     reverse: bool = False
     failed: bool = False
+    docked: bool = False
+    runup: bool = False
 
 
 @dataclass
@@ -264,8 +283,103 @@ class Navigator:
         raw[:, 0] = np.clip(raw[:, 0], -view.max_speed[idx], view.max_speed[idx])
         raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
         # At the goal position, only turn to the goal heading.
+        raw = self._dock(view, idx, raw, targets, final)
         cmd[idx] = self._monitor(view, idx, raw)
+        self._hold_outside(view, idx, cmd)
         return cmd
+
+    def _dock(self, view: ControlView, idx, raw, targets, final) -> np.ndarray:
+        """The parking manoeuvre to the exact pose, in the goal frame.
+
+        Within ``runup_m`` of the goal and roughly aligned, the pivot tracks the goal's axis
+        (a Stanley-type law: aim at ``atan(k * lateral error)`` off the axis, forwards or in
+        reverse) while closing the longitudinal error. A skid too close to fix its lateral
+        error backs out along the axis with the same law, which also reduces it, and comes in
+        again. Inside the parked band it holds still until pushed out of the outer band.
+        """
+        p = self.params
+        goals = view.goals[idx]
+        pose = view.poses[idx]
+        d = pose[:, :2] - goals[:, :2]
+        cg, sg = np.cos(goals[:, 2]), np.sin(goals[:, 2])
+        e_long = d[:, 0] * cg + d[:, 1] * sg  # > 0 when past the goal along its heading
+        e_lat = -d[:, 0] * sg + d[:, 1] * cg
+        e_yaw = wrap_angle(goals[:, 2] - pose[:, 2])
+        dist = np.hypot(e_long, e_lat)
+        out = raw.copy()
+        for k, i in enumerate(idx):
+            nav = self._robots[i]
+            if view.goal_changed[i]:
+                nav.docked = nav.runup = False
+            parked = (
+                abs(e_long[k]) < p.parked_pos_m
+                and abs(e_lat[k]) < p.dock_lateral_m
+                and abs(e_yaw[k]) < p.parked_yaw_rad
+            )
+            if nav.docked and (dist[k] > p.resume_pos_m or abs(e_yaw[k]) > p.resume_yaw_rad):
+                nav.docked = False
+            if nav.docked or parked:
+                nav.docked, nav.runup = True, False
+                out[k] = 0.0
+                continue
+            near = final[k] and dist[k] < p.runup_m * 1.2 and abs(e_yaw[k]) < np.deg2rad(60)
+            if not near:
+                nav.runup = False
+                continue
+            too_close = abs(e_lat[k]) > p.dock_lateral_m and abs(e_long[k]) < p.dock_radius_m
+            if too_close:
+                nav.runup = True
+            if nav.runup and (abs(e_lat[k]) < 0.5 * p.dock_lateral_m or abs(e_long[k]) > p.runup_m):
+                nav.runup = False
+            # Travel direction: towards the goal along its axis, or away from it (run-up).
+            to_goal = -np.sign(e_long[k]) if abs(e_long[k]) > 1e-6 else 1.0
+            sgn = -to_goal if nav.runup else to_goal
+            if abs(e_long[k]) < p.parked_pos_m and not nav.runup:
+                # On the spot: only turn to the goal heading.
+                w = np.clip(p.k_dock_yaw * e_yaw[k], -view.max_yaw_rate[i], view.max_yaw_rate[i])
+                out[k] = (0.0, w)
+                continue
+            aim = -sgn * np.arctan(p.k_lateral * e_lat[k])  # heading off the axis, goal frame
+            yaw_err = wrap_angle(aim + e_yaw[k])  # (goal + aim) - current heading
+            speed = np.clip(
+                p.k_dock * (p.runup_m if nav.runup else abs(e_long[k])),
+                p.min_goal_speed_mps,
+                0.5 * view.max_speed[i],
+            )
+            v = sgn * speed * max(np.cos(yaw_err), 0.0) ** 2
+            w = np.clip(p.k_dock_yaw * yaw_err, -view.max_yaw_rate[i], view.max_yaw_rate[i])
+            out[k] = (v, w)
+        return out
+
+    def docked(self) -> np.ndarray:
+        """Robots holding still on their goals."""
+        return np.array([r.docked for r in self._robots], dtype=bool)
+
+    def _hold_outside(self, view: ControlView, idx: np.ndarray, cmd: np.ndarray) -> None:
+        """Held skids (fill order) stop before they come within ``hold_gap_m`` of their
+        parking boundary; moving away from it stays allowed."""
+        if view.hold is None or not view.hold[idx].any():
+            return
+        gap = self.params.hold_gap_m
+        for i in idx[view.hold[idx]]:
+            zone = view.hold_zones[i] if i < len(view.hold_zones) else None
+            if zone is None:
+                continue
+            fp = view.footprints[i]
+            now = shapely.Polygon(
+                footprint_corners(view.poses[i][None], fp.corners_body()[None])[0]
+            )
+            if now.intersects(zone):
+                continue  # already inside: never freeze in the middle of the formation
+            v, w = cmd[i]
+            ahead = (
+                view.poses[i]
+                + np.array([v * np.cos(view.poses[i, 2]), v * np.sin(view.poses[i, 2]), w]) * 0.5
+            )
+            nxt = shapely.Polygon(footprint_corners(ahead[None], fp.corners_body()[None])[0])
+            d_now, d_next = now.distance(zone), nxt.distance(zone)
+            if d_next < gap and d_next <= d_now:
+                cmd[i] = 0.0
 
     def _outlines(self, view: ControlView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Body-frame outline samples of every skid (cached), their owners, and grown monitor
