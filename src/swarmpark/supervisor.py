@@ -13,10 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import shapely
-import shapely.ops
-from shapely.geometry import LineString, Polygon
-from shapely.ops import unary_union
+from shapely.geometry import LineString, Point, Polygon
+from shapely.ops import nearest_points, unary_union
 
 from . import assign as assign_mod
 from .control.base import Controller, ControlView
@@ -174,18 +172,19 @@ class Supervisor:
         boundary = as_simple_polygon(cmd.boundary, "park.boundary")
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.world.robots[i].footprint for i in idx]
-        return (
-            idx,
+        # The skids enter from their side: the opening is the boundary point nearest to them.
+        centroid = Point(self.sim.poses[idx, :2].mean(axis=0))
+        opening = nearest_points(boundary.exterior, centroid)[0]
+        lay = layout(
             boundary,
-            layout(
-                boundary,
-                fps,
-                heading=heading,
-                method=cmd.method,
-                margin_m=cmd.margin_m,
-                obstacles=self._known_solids(boundary),
-            ),
+            fps,
+            heading=heading,
+            method=cmd.method,
+            margin_m=cmd.margin_m,
+            obstacles=self._known_solids(boundary),
+            opening=(opening.x, opening.y),
         )
+        return idx, boundary, lay
 
     def _known_solids(self, region: Polygon):
         """Walls and static obstacles the operator knows of, within ``region``."""
