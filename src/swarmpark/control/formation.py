@@ -574,7 +574,9 @@ def _solve_nlp(
     def col(values) -> ca.DM:
         return ca.repmat(ca.DM(np.asarray(values, dtype=float)), 1, cols)
 
-    if method == "formation":
+    if method == "formation" and problem.edges.shape[0] == 0:
+        objective = ca.SX(0.0)  # no formation to hold: any feasible plan is optimal
+    elif method == "formation":
         ei, ej = problem.edges[:, 0].tolist(), problem.edges[:, 1].tolist()
         sigma = ss[ei, :] * col(1.0 / lengths[ei])
         off, at = problem.offsets_m, problem.offset_at
@@ -587,7 +589,8 @@ def _solve_nlp(
         ex = px[ej, :] - px[ei, :] - (ci * dxp - si * dyp)
         ey = py[ej, :] - py[ei, :] - (si * dxp + ci * dyp)
         # Scale by the formation size so IPOPT's tolerances are relative to it.
-        ref = float(np.mean(np.linalg.norm(off, axis=-1))) or 1.0
+        ref = float(np.mean(np.linalg.norm(off, axis=-1)))
+        ref = ref if ref > 0 else 1.0
         objective = ca.sum1(ca.sum2(ex * ex + ey * ey)) / ref**2
     elif method == "no_formation":
         # Each robot gets as far along its path as early as it can (a smooth stand-in for the
@@ -631,9 +634,14 @@ def _solve_nlp(
     stats = solver.stats()
     xs = np.asarray(sol["x"]).ravel()
     v = np.clip(xs[: r * cols].reshape((r, cols), order="F"), 0.0, problem.v_max_mps)
-    s = np.clip(xs[r * cols :].reshape((r, cols), order="F"), 0.0, lengths[:, None])
-    s[:, 0], s[:, -1] = 0.0, lengths
     v[:, 0] = v[:, -1] = 0.0
+    # Rebuild the distances from the speeds with (7), then scale both by the (1 +- 1e-8)
+    # factor that lands on L_i: (7) then holds exactly, s never decreases and ends at L_i.
+    s = np.concatenate([np.zeros((r, 1)), np.cumsum(0.5 * dt * (v[:, 1:] + v[:, :-1]), 1)], 1)
+    factor = lengths / np.maximum(s[:, -1], 1e-300)
+    v = np.minimum(v * factor[:, None], problem.v_max_mps)
+    s = s * factor[:, None]
+    s[:, -1] = lengths
     return v, s, bool(stats["success"]), str(stats["return_status"]), int(stats["iter_count"])
 
 

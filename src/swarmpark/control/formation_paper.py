@@ -151,9 +151,12 @@ def paper_problem() -> FormationProblem:
     )
 
 
-def grid_problem(n_robots: int = 20, M: int = 60, *, spacing_m: float = 0.25) -> FormationProblem:
+def grid_problem(
+    n_robots: int = 20, M: int = 60, *, spacing_m: float = 0.25, route_m: float | None = None
+) -> FormationProblem:
     """A larger benchmark: ``n_robots`` in rows of five change from a block to a wedge while
-    following a 6.3 m lane change 0.8 m to the left (``V_max = a_max`` 0.12, ``D_safe = 0.09 m``, ``dt = 1 s``).
+    following a lane change 0.8 m to the left, ``route_m`` long (default ``0.105 M`` metres,
+    6.3 m for ``M = 60``, about 90 % of what the speed bound allows) (``V_max = a_max`` 0.12, ``D_safe = 0.09 m``, ``dt = 1 s``).
 
     The leader is the front robot of the middle column; the edges form a two-level tree: the
     middle robot of each row follows the leader, the others their row's middle robot.
@@ -178,7 +181,7 @@ def grid_problem(n_robots: int = 20, M: int = 60, *, spacing_m: float = 0.25) ->
     rel = np.stack([block, wedge])  # (2, n, 2)
     offsets = np.stack([rel[:, j] - rel[:, i] for i, j in edges])  # (E, 2, 2)
     u = _DENSE_U
-    length, shift = 6.3, 0.8
+    length, shift = (0.105 * M if route_m is None else float(route_m)), 0.8
     curve = np.stack([length * u, 0.5 * shift * (1.0 - np.cos(np.pi * u))], axis=1)
     hold = np.array([[0.0, 0.3], [0.7, 1.0]])
     paths, k_off, at = _formation_paths(curve, leader, edges, offsets, hold)
