@@ -1,0 +1,679 @@
+"""Particle-filter localization against a known map (AMCL style) and simulated odometry drift.
+
+The filter follows Thrun, Burgard and Fox, *Probabilistic Robotics* (2005), as ROS ``amcl``
+does: ``sample_motion_model_odometry`` (Table 5.6) for prediction, the likelihood-field sensor
+model (Table 6.3) on a subsample of beams, low-variance resampling (Table 4.4) when the
+effective sample size falls, KLD-sampling for an adaptive particle count (Fox 2003) and
+augmented MCL (Table 8.3: ``w_slow``/``w_fast``) that injects uniform particles when the scans
+stop fitting, which recovers a kidnapped robot. :class:`OdometryDrift` turns true motion into
+the drifting wheel odometry a real skid reports.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+from scipy.special import ndtri
+
+from swarmpark.geometry import wrap_angle
+from swarmpark.gridmap import OccupancyGrid
+from swarmpark.sense.lidar import LidarSpec, beam_angles
+
+__all__ = [
+    "LikelihoodField",
+    "FilterConfig",
+    "PoseEstimate",
+    "ParticleFilter",
+    "OdometryDrift",
+    "relative_motion",
+    "low_variance_resample",
+    "kld_sample_count",
+]
+
+#: Below this translation (metres) the heading of the motion (rot1) is meaningless: turn in
+#: place, as amcl does.
+MIN_TRANSLATION_FOR_HEADING_M = 0.01
+#: Distance given to scan end points off the map (far enough for the Gaussian to vanish).
+OFF_MAP_DISTANCE_M = 1e3
+#: Bisection steps when choosing the tempering exponent (resolution 2**-12).
+TEMPER_BISECTIONS = 12
+
+
+class LikelihoodField:
+    """Likelihood-field sensor model of a map (Thrun Table 6.3), precomputed once per map.
+
+    The log-likelihood of a scan end point is tabulated on a lattice of half a cell (cell
+    corners, edge midpoints and centres) and looked up at the nearest lattice point. Distances
+    are measured to the closed squares of occupied cells and to the map edge, so an end point
+    lying on a wall's face scores as a hit whichever side the wall faces. Unknown cells count
+    as free.
+
+    Parameters
+    ----------
+    grid
+        The map.
+    sigma_hit_m
+        Standard deviation of the Gaussian around obstacles.
+    z_hit, z_rand
+        Mixture weights of the hit and uniform components (``z_rand`` is spread over
+        ``max_range_m``).
+    max_range_m
+        Range of the scanner that the model scores.
+    min_clearance_m
+        Random and global particles are only placed in known free cells at least this far from
+        an obstacle (a skid's pivot cannot be closer to a wall than its half width).
+    """
+
+    def __init__(
+        self,
+        grid: OccupancyGrid,
+        *,
+        sigma_hit_m: float = 0.1,
+        z_hit: float = 0.9,
+        z_rand: float = 0.1,
+        max_range_m: float = 5.0,
+        min_clearance_m: float = 0.0,
+    ) -> None:
+        if not sigma_hit_m > 0:
+            raise ValueError(f"likelihood.sigma_hit_m must be > 0 (got {sigma_hit_m})")
+        if not (z_hit >= 0 and z_rand > 0):
+            raise ValueError(
+                f"likelihood.z_hit must be >= 0 and z_rand > 0 (got {z_hit}, {z_rand})"
+            )
+        if not max_range_m > 0:
+            raise ValueError(f"likelihood.max_range_m must be > 0 (got {max_range_m})")
+        self.resolution_m = float(grid.resolution_m)
+        self.origin = (float(grid.origin[0]), float(grid.origin[1]))
+        self.sigma_hit_m = float(sigma_hit_m)
+        self.z_hit, self.z_rand = float(z_hit), float(z_rand)
+        self.max_range_m = float(max_range_m)
+        self.shape = grid.shape
+        h, w = grid.shape
+        # Lattice point (2r+1, 2c+1) is the centre of cell (r, c); its 3x3 block is the square.
+        centre = np.zeros((2 * h + 1, 2 * w + 1), dtype=bool)
+        centre[1::2, 1::2] = grid.occupied
+        on_obstacle = ndimage.binary_dilation(centre, structure=np.ones((3, 3), dtype=bool))
+        on_obstacle[[0, -1], :] = True  # the map edge counts as a wall, as for the lidar
+        on_obstacle[:, [0, -1]] = True
+        self.step_m = 0.5 * self.resolution_m
+        self.distance_m = ndimage.distance_transform_edt(~on_obstacle) * self.step_m
+        self.log_p = self._log_p(self.distance_m)
+        self.log_p_off_map = float(np.log(self.z_rand / self.max_range_m))
+        # Where the filter may place particles: known free cells with enough clearance.
+        free = ~grid.occupied & ~grid.unknown
+        clear = grid.distance_field() >= min_clearance_m
+        self.free_cells = np.argwhere(free & clear)
+        if len(self.free_cells) == 0:
+            raise ValueError(
+                f"likelihood: the map has no free cell with clearance >= {min_clearance_m} m"
+            )
+
+    def _log_p(self, d: np.ndarray) -> np.ndarray:
+        gauss = np.exp(-0.5 * (d / self.sigma_hit_m) ** 2) / (np.sqrt(2 * np.pi) * self.sigma_hit_m)
+        return np.log(self.z_hit * gauss + self.z_rand / self.max_range_m)
+
+    def _lookup(self, table: np.ndarray, xy: np.ndarray, off_map: float) -> np.ndarray:
+        xy = np.asarray(xy, dtype=float)
+        j = np.rint((xy[..., 0] - self.origin[0]) / self.step_m).astype(np.int64)
+        i = np.rint((xy[..., 1] - self.origin[1]) / self.step_m).astype(np.int64)
+        rows, cols = table.shape
+        inside = (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
+        flat = np.where(inside, i * cols + j, 0)
+        return np.where(inside, table.ravel()[flat], off_map)
+
+    def distance(self, xy: np.ndarray) -> np.ndarray:
+        """Distance (metres, to half a cell) from world points ``(..., 2)`` to the nearest
+        obstacle. Points outside the map count as far from everything
+        (:data:`OFF_MAP_DISTANCE_M`), as in amcl: a particle that drifted off the map must not
+        score its scan as hits on the edge."""
+        return self._lookup(self.distance_m, xy, OFF_MAP_DISTANCE_M)
+
+    def log_likelihood(self, xy: np.ndarray) -> np.ndarray:
+        """Log of the per-beam likelihood ``z_hit * N(d; 0, sigma) + z_rand / max_range`` at
+        world end points ``(..., 2)``."""
+        return self._lookup(self.log_p, xy, self.log_p_off_map)
+
+    def sample_free(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` poses uniform over free space (cell, then a point in it) and heading."""
+        rc = self.free_cells[rng.integers(0, len(self.free_cells), n)]
+        off = rng.random((n, 2))
+        x = self.origin[0] + (rc[:, 1] + off[:, 0]) * self.resolution_m
+        y = self.origin[1] + (rc[:, 0] + off[:, 1]) * self.resolution_m
+        return np.column_stack([x, y, rng.uniform(-np.pi, np.pi, n)])
+
+
+@dataclass(frozen=True, kw_only=True)
+class FilterConfig:
+    """Particle-filter settings (names after ROS amcl where one exists).
+
+    Parameters
+    ----------
+    min_particles, max_particles
+        Bounds of the particle count; without KLD (``adaptive=False``) ``max_particles`` is used.
+    adaptive
+        KLD-sampling: after each resampling keep only as many particles as needed so that the
+        histogram of the belief is within ``kld_err`` (with probability ``kld_quantile``).
+    kld_bin_m, kld_bin_rad
+        Histogram bins of KLD-sampling (and of clustering for :meth:`ParticleFilter.estimate`).
+    alpha1, alpha2, alpha3, alpha4
+        Odometry noise of Thrun's model: rotation from rotation, rotation from translation,
+        translation from translation, translation from rotation.
+    max_beams
+        Beams scored per update (evenly spread over the valid returns).
+    likelihood_power
+        Exponent applied to the product of beam likelihoods (1 = the textbook product). Beams
+        are not independent (a wall shifts all of its returns together), so the default counts
+        the scored beams as about a third as many independent ones.
+    resample_neff_ratio
+        Resample when the effective sample size falls below this share of the particles.
+    min_neff_ratio
+        Adaptive tempering: a scan whose full likelihood would leave fewer effective particles
+        than this share is applied with an exponent below 1 (0 turns tempering off).
+    global_candidates
+        Uniform poses scored by the first scan of a global localization (see
+        :meth:`ParticleFilter.init_global`).
+    injection_candidates
+        Injected particles are drawn from this many uniform candidates, weighted by the current
+        scan (0 = plain uniform injection as in amcl).
+    alpha_slow, alpha_fast
+        Smoothing rates of the long- and short-term average likelihood (augmented MCL); random
+        particles are injected with probability ``max(0, 1 - w_fast / w_slow)``. Set
+        ``alpha_fast = 0`` to turn injection off. The defaults react faster than amcl's
+        (0.001, 0.1), whose long-term average takes minutes to settle.
+    """
+
+    min_particles: int = 200
+    max_particles: int = 3000
+    adaptive: bool = True
+    kld_err: float = 0.05
+    kld_quantile: float = 0.99
+    kld_bin_m: float = 0.25
+    kld_bin_rad: float = np.radians(10.0)
+    alpha1: float = 0.1
+    alpha2: float = 0.1
+    alpha3: float = 0.1
+    alpha4: float = 0.1
+    max_beams: int = 60
+    likelihood_power: float = 0.3
+    resample_neff_ratio: float = 0.5
+    min_neff_ratio: float = 0.1
+    global_candidates: int = 50_000
+    injection_candidates: int = 5000
+    alpha_slow: float = 0.02
+    alpha_fast: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not (1 <= self.min_particles <= self.max_particles):
+            raise ValueError(
+                "filter.min_particles and max_particles must satisfy 1 <= min <= max "
+                f"(got {self.min_particles}, {self.max_particles})"
+            )
+        for name in ("alpha1", "alpha2", "alpha3", "alpha4"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"filter.{name} must be >= 0 (got {getattr(self, name)})")
+        if self.max_beams < 1:
+            raise ValueError(f"filter.max_beams must be >= 1 (got {self.max_beams})")
+        if not 0 < self.kld_err < 1 or not 0.5 < self.kld_quantile < 1:
+            raise ValueError(
+                "filter.kld_err must be in (0, 1) and kld_quantile in (0.5, 1) "
+                f"(got {self.kld_err}, {self.kld_quantile})"
+            )
+        if not 0 <= self.alpha_slow < 1 or not 0 <= self.alpha_fast <= 1:
+            raise ValueError(
+                "filter.alpha_slow must be in [0, 1) and alpha_fast in [0, 1] "
+                f"(got {self.alpha_slow}, {self.alpha_fast})"
+            )
+        if not 0 < self.resample_neff_ratio <= 1:
+            raise ValueError(
+                f"filter.resample_neff_ratio must be in (0, 1] (got {self.resample_neff_ratio})"
+            )
+        if not 0 <= self.min_neff_ratio < 1:
+            raise ValueError(f"filter.min_neff_ratio must be in [0, 1) (got {self.min_neff_ratio})")
+        if not self.likelihood_power > 0:
+            raise ValueError(f"filter.likelihood_power must be > 0 (got {self.likelihood_power})")
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """A pose estimate: ``pose`` ``(3,)``, ``cov`` ``(3, 3)`` (x, y, yaw) and the share of the
+    belief's weight in the cluster it was computed from."""
+
+    pose: np.ndarray
+    cov: np.ndarray
+    weight: float
+
+
+def relative_motion(prev: np.ndarray, now: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Odometry increment ``(rot1, trans, rot2)`` between poses ``(..., 3)`` (Thrun Table 5.6).
+
+    Below :data:`MIN_TRANSLATION_FOR_HEADING_M` the motion counts as a turn in place.
+    """
+    prev, now = np.asarray(prev, dtype=float), np.asarray(now, dtype=float)
+    dx, dy = now[..., 0] - prev[..., 0], now[..., 1] - prev[..., 1]
+    trans = np.hypot(dx, dy)
+    heading = np.arctan2(dy, dx)
+    rot1 = np.where(trans < MIN_TRANSLATION_FOR_HEADING_M, 0.0, wrap_angle(heading - prev[..., 2]))
+    rot2 = wrap_angle(now[..., 2] - prev[..., 2] - rot1)
+    return rot1, trans, rot2
+
+
+def _sample_odometry(
+    poses: np.ndarray,
+    rot1: np.ndarray,
+    trans: np.ndarray,
+    rot2: np.ndarray,
+    alphas: tuple[float, float, float, float],
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Thrun's sample_motion_model_odometry for poses ``(M, 3)``. As in amcl, the rotation noise
+    uses the smaller of a rotation and its reverse, so that driving backwards (rot1 near pi)
+    is not treated as a half turn."""
+    a1, a2, a3, a4 = alphas
+    m = len(poses)
+    r1n = np.minimum(np.abs(wrap_angle(rot1)), np.abs(wrap_angle(rot1 - np.pi)))
+    r2n = np.minimum(np.abs(wrap_angle(rot2)), np.abs(wrap_angle(rot2 - np.pi)))
+    sd_r1 = np.sqrt(a1 * r1n**2 + a2 * trans**2)
+    sd_tr = np.sqrt(a3 * trans**2 + a4 * (r1n**2 + r2n**2))
+    sd_r2 = np.sqrt(a1 * r2n**2 + a2 * trans**2)
+    z = rng.standard_normal((m, 3))
+    h1 = rot1 + sd_r1 * z[:, 0]
+    tr = trans + sd_tr * z[:, 1]
+    h2 = rot2 + sd_r2 * z[:, 2]
+    out = np.empty_like(poses)
+    th = poses[:, 2] + h1
+    out[:, 0] = poses[:, 0] + tr * np.cos(th)
+    out[:, 1] = poses[:, 1] + tr * np.sin(th)
+    out[:, 2] = wrap_angle(th + h2)
+    return out
+
+
+def logsumexp(a: np.ndarray) -> float:
+    """``log(sum(exp(a)))`` without overflow (1-D)."""
+    m = float(np.max(a))
+    if not np.isfinite(m):
+        return m
+    return m + float(np.log(np.sum(np.exp(a - m))))
+
+
+def _ess_ratio(log_w: np.ndarray) -> float:
+    w = np.exp(log_w - logsumexp(log_w))
+    return float(1.0 / np.sum(w * w) / len(w))
+
+
+def _temper(log_w: np.ndarray, log_lik: np.ndarray, min_ratio: float) -> float:
+    """Largest exponent ``beta`` in (0, 1] such that weighting by ``beta * log_lik`` keeps the
+    effective sample size at least ``min_ratio`` of the particles (found by bisection).
+
+    One scan of a sharp sensor model can otherwise put all weight on the few particles that
+    happen to lie nearest some pose -- often a wrong one while localizing globally -- and
+    resampling then loses the true pose. Tempering gives up part of one scan's information
+    only when the update would degenerate; a filter that is tracking keeps ``beta = 1``.
+    """
+    if min_ratio <= 0 or _ess_ratio(log_w + log_lik) >= min_ratio:
+        return 1.0
+    lo, hi = 0.0, 1.0
+    for _ in range(TEMPER_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        if _ess_ratio(log_w + mid * log_lik) >= min_ratio:
+            lo = mid
+        else:
+            hi = mid
+    return max(lo, 1.0 / 2**TEMPER_BISECTIONS)
+
+
+def low_variance_resample(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices ``(n,)`` drawn by low-variance (systematic) resampling (Thrun Table 4.4).
+
+    Examples
+    --------
+    >>> low_variance_resample(np.array([0.5, 0.25, 0.25]), 4, np.random.default_rng(0)).tolist()
+    [0, 0, 1, 2]
+    """
+    w = np.asarray(weights, dtype=float)
+    c = np.cumsum(w / w.sum())
+    c[-1] = 1.0  # round-off must not leave the last pointer past the end
+    u = (rng.random() + np.arange(n)) / n
+    return np.searchsorted(c, u, side="right").clip(0, len(w) - 1)
+
+
+def kld_sample_count(k: np.ndarray, err: float, quantile: float) -> np.ndarray:
+    """Particles needed for ``k`` non-empty histogram bins (Fox 2003, Wilson-Hilferty form)."""
+    k = np.asarray(k, dtype=float)
+    z = ndtri(quantile)
+    km1 = np.maximum(k - 1.0, 1.0)
+    a = 2.0 / (9.0 * km1)
+    return np.where(k <= 1, 1.0, km1 / (2.0 * err) * (1.0 - a + np.sqrt(a) * z) ** 3)
+
+
+class ParticleFilter:
+    """Monte Carlo localization of one skid in a known map.
+
+    Parameters
+    ----------
+    field
+        The map's :class:`LikelihoodField` (share one between all skids on a map).
+    spec
+        The skid's scanner (beam directions, mount, range).
+    config
+        Filter settings.
+    rng
+        The filter's random generator.
+    initial_pose, initial_std
+        A Gaussian start around a known pose (``initial_std`` = (x, y, yaw) standard
+        deviations); without ``initial_pose`` particles start uniform over free space
+        (global localization) with ``max_particles`` of them.
+    """
+
+    def __init__(
+        self,
+        field: LikelihoodField,
+        spec: LidarSpec,
+        *,
+        config: FilterConfig | None = None,
+        rng: np.random.Generator,
+        initial_pose: np.ndarray | None = None,
+        initial_std: tuple[float, float, float] = (0.1, 0.1, np.radians(5.0)),
+    ) -> None:
+        self.field = field
+        self.spec = spec
+        self.config = config if config is not None else FilterConfig()
+        self.rng = rng
+        self._beam_dirs = beam_angles(spec) + spec.mount_yaw_rad
+        self.w_slow = 0.0
+        self.w_fast = 0.0
+        self.updates = 0
+        if initial_pose is None:
+            self.init_global()
+        else:
+            self.init_pose(initial_pose, initial_std)
+
+    # -- initialization -------------------------------------------------------------------
+    def init_global(self) -> None:
+        """Spread ``max_particles`` uniformly over free space.
+
+        The first scan after this is scored on ``global_candidates`` fresh uniform poses instead
+        (and ``max_particles`` are drawn from them): a few thousand particles rarely land close
+        enough to the true pose for a sharp sensor model to single it out.
+        """
+        m = self.config.max_particles
+        self.particles = self.field.sample_free(m, self.rng)
+        self.log_w = np.full(m, -np.log(m))
+        self._global_pending = True
+
+    def init_pose(
+        self,
+        pose: np.ndarray,
+        std: tuple[float, float, float] = (0.1, 0.1, np.radians(5.0)),
+    ) -> None:
+        """Gaussian cloud around ``pose`` with ``max_particles`` (or ``min_particles`` when
+        adaptive: a known start needs few)."""
+        pose = np.asarray(pose, dtype=float).reshape(3)
+        if not np.all(np.isfinite(pose)):
+            raise ValueError(f"filter.initial_pose must be finite (got {pose.tolist()})")
+        m = self.config.min_particles if self.config.adaptive else self.config.max_particles
+        p = pose + self.rng.standard_normal((m, 3)) * np.asarray(std, dtype=float)
+        p[:, 2] = wrap_angle(p[:, 2])
+        self.particles = p
+        self.log_w = np.full(m, -np.log(m))
+        self._global_pending = False
+
+    # -- state ---------------------------------------------------------------------------
+    @property
+    def weights(self) -> np.ndarray:
+        """Normalized weights ``(M,)``."""
+        w = np.exp(self.log_w - logsumexp(self.log_w))
+        return w / w.sum()
+
+    @property
+    def n_eff(self) -> float:
+        w = self.weights
+        return float(1.0 / np.sum(w * w))
+
+    # -- steps ---------------------------------------------------------------------------
+    def predict(self, odom_prev: np.ndarray, odom_now: np.ndarray) -> None:
+        """Move every particle by the odometry increment from ``odom_prev`` to ``odom_now``
+        (poses in the odometry frame), with sampled noise."""
+        rot1, trans, rot2 = relative_motion(odom_prev, odom_now)
+        c = self.config
+        self.particles = _sample_odometry(
+            self.particles, rot1, trans, rot2, (c.alpha1, c.alpha2, c.alpha3, c.alpha4), self.rng
+        )
+
+    def _beam_subset(self, ranges: np.ndarray) -> np.ndarray:
+        r = np.asarray(ranges, dtype=float).reshape(self.spec.num_beams)
+        valid = np.flatnonzero(np.isfinite(r) & (r < self.spec.max_range_m))
+        k = self.config.max_beams
+        if len(valid) > k:
+            valid = valid[np.linspace(0, len(valid) - 1, k).round().astype(np.int64)]
+        return valid
+
+    def scan_log_likelihood(self, particles: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+        """Log-likelihood ``(M,)`` of a scan at each of ``particles`` ``(M, 3)``, per beam
+        (the mean over the scored beams, so it does not grow with their number)."""
+        beams = self._beam_subset(ranges)
+        if len(beams) == 0:
+            return np.zeros(len(particles))
+        r = np.asarray(ranges, dtype=float).reshape(-1)[beams]
+        a = self._beam_dirs[beams]
+        # End points in the body frame (mount offset included), then to world per particle.
+        bx = self.spec.mount_x_m + r * np.cos(a)
+        by = self.spec.mount_y_m + r * np.sin(a)
+        c, s = np.cos(particles[:, 2:3]), np.sin(particles[:, 2:3])
+        wx = particles[:, 0:1] + c * bx - s * by
+        wy = particles[:, 1:2] + s * bx + c * by
+        ll = self.field.log_likelihood(np.stack([wx, wy], -1))
+        return ll.mean(axis=1)
+
+    def update(self, ranges: np.ndarray) -> dict:
+        """Weigh particles by a scan ``(B,)`` (ranges as from :func:`~.lidar.scan`), then
+        resample if the effective sample size is low or random particles are due.
+
+        Returns a dict of diagnostics: ``n_particles``, ``n_eff``, ``p_inject``,
+        ``resampled``, ``beams``.
+        """
+        cfg = self.config
+        beams = self._beam_subset(ranges)
+        k = len(beams)
+        diag = {"beams": k, "p_inject": 0.0, "resampled": False, "tempering": 1.0}
+        if k > 0 and self._global_pending and cfg.global_candidates > len(self.particles):
+            self.particles = self.field.sample_free(cfg.global_candidates, self.rng)
+            self.log_w = np.full(cfg.global_candidates, -np.log(cfg.global_candidates))
+        if k > 0:
+            self._global_pending = False
+        per_beam = self.scan_log_likelihood(self.particles, ranges)
+        if k == 0:
+            diag.update(n_particles=len(self.particles), n_eff=self.n_eff)
+            return diag
+        w_prev = self.weights
+        # Augmented MCL on the per-beam (geometric-mean) likelihood, which is scale-free.
+        w_avg = float(np.sum(w_prev * np.exp(per_beam)))
+        if self.updates == 0 or self.w_slow == 0.0:
+            self.w_slow = self.w_fast = w_avg
+        else:
+            self.w_slow += cfg.alpha_slow * (w_avg - self.w_slow)
+            self.w_fast += cfg.alpha_fast * (w_avg - self.w_fast)
+        self.updates += 1
+        beta = _temper(self.log_w, cfg.likelihood_power * k * per_beam, cfg.min_neff_ratio)
+        diag["tempering"] = beta
+        self.log_w = self.log_w + beta * cfg.likelihood_power * k * per_beam
+        self.log_w -= logsumexp(self.log_w)
+        p_inject = max(0.0, 1.0 - self.w_fast / self.w_slow) if cfg.alpha_fast > 0 else 0.0
+        diag["p_inject"] = p_inject
+        neff = self.n_eff
+        if neff < cfg.resample_neff_ratio * len(self.particles) or p_inject > 0:
+            self._resample(p_inject, ranges)
+            diag["resampled"] = True
+        diag.update(n_particles=len(self.particles), n_eff=self.n_eff)
+        return diag
+
+    def _bins(self, particles: np.ndarray) -> np.ndarray:
+        cfg = self.config
+        n_yaw = max(int(np.ceil(2 * np.pi / cfg.kld_bin_rad)), 1)
+        ix = np.floor(particles[:, 0] / cfg.kld_bin_m).astype(np.int64)
+        iy = np.floor(particles[:, 1] / cfg.kld_bin_m).astype(np.int64)
+        it = np.floor((particles[:, 2] + np.pi) / (2 * np.pi) * n_yaw).astype(np.int64) % n_yaw
+        return np.column_stack([ix, iy, it])
+
+    def _resample(self, p_inject: float, ranges: np.ndarray) -> None:
+        cfg = self.config
+        w = self.weights
+        m_max = cfg.max_particles if cfg.adaptive else min(len(self.particles), cfg.max_particles)
+        idx = low_variance_resample(w, m_max, self.rng)
+        new = self.particles[idx]
+        # A random order, so that any prefix is itself a fair sample (KLD stops at a prefix).
+        new = new[self.rng.permutation(m_max)]
+        if p_inject > 0:
+            swap = self.rng.random(m_max) < p_inject
+            new[swap] = self._injection(int(swap.sum()), ranges)
+        if cfg.adaptive:
+            bins = self._bins(new)
+            key = (bins[:, 0] * 1_000_003 + bins[:, 1]) * 1_009 + bins[:, 2]
+            _, first = np.unique(key, return_index=True)
+            is_new = np.zeros(m_max, dtype=bool)
+            is_new[first] = True
+            k = np.cumsum(is_new)
+            need = np.maximum(kld_sample_count(k, cfg.kld_err, cfg.kld_quantile), cfg.min_particles)
+            enough = np.flatnonzero(np.arange(1, m_max + 1) >= need)
+            m = int(enough[0]) + 1 if len(enough) else m_max
+            new = new[:m]
+        self.particles = new
+        self.log_w = np.full(len(new), -np.log(len(new)))
+
+    def _injection(self, n: int, ranges: np.ndarray) -> np.ndarray:
+        """``n`` random poses for augmented MCL. With ``injection_candidates > n`` they are
+        drawn from that many uniform candidates in proportion to the current scan's (tempered)
+        likelihood -- sensor-resetting localization (Lenser and Veloso 2000) -- so that a
+        kidnapped robot is found in a large map, not only by luck."""
+        n_cand = self.config.injection_candidates
+        if n == 0 or n_cand <= n:
+            return self.field.sample_free(n, self.rng)
+        cand = self.field.sample_free(n_cand, self.rng)
+        k = len(self._beam_subset(ranges))
+        ll = self.config.likelihood_power * k * self.scan_log_likelihood(cand, ranges)
+        flat = np.full(n_cand, -np.log(n_cand))
+        beta = _temper(flat, ll, self.config.min_neff_ratio)
+        lw = beta * ll
+        return cand[low_variance_resample(np.exp(lw - lw.max()), n, self.rng)]
+
+    def kidnap_reset(self) -> None:
+        """Restart global localization (what an operator does for a robot moved by hand)."""
+        self.init_global()
+        self.w_slow = self.w_fast = 0.0
+
+    # -- output --------------------------------------------------------------------------
+    def estimate(self, *, cluster: bool = True) -> PoseEstimate:
+        """Mean pose (circular mean of yaw) and covariance of the belief.
+
+        With ``cluster`` (as amcl) the particles are grouped into connected histogram bins
+        (:attr:`FilterConfig.kld_bin_m`, ``kld_bin_rad``) and the heaviest group is used, so a
+        belief with two hypotheses does not report the point between them.
+        """
+        w = self.weights
+        p = self.particles
+        total = 1.0
+        if cluster and len(p) > 1:
+            labels = self._cluster_labels(p)
+            sums = np.bincount(labels, weights=w)
+            best = int(np.argmax(sums))
+            keep = labels == best
+            total = float(sums[best])
+            p, w = p[keep], w[keep] / sums[best]
+        yaw = float(np.arctan2(np.sum(w * np.sin(p[:, 2])), np.sum(w * np.cos(p[:, 2]))))
+        mean = np.array([np.sum(w * p[:, 0]), np.sum(w * p[:, 1]), yaw])
+        dev = np.column_stack([p[:, 0] - mean[0], p[:, 1] - mean[1], wrap_angle(p[:, 2] - yaw)])
+        cov = (dev * w[:, None]).T @ dev
+        return PoseEstimate(mean, cov, total)
+
+    def _cluster_labels(self, particles: np.ndarray) -> np.ndarray:
+        bins = self._bins(particles)
+        uniq, inverse = np.unique(bins, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        n = len(uniq)
+        n_yaw = max(int(np.ceil(2 * np.pi / self.config.kld_bin_rad)), 1)
+        tree = cKDTree(uniq.astype(float))
+        # Bins touching in x, y and yaw (Chebyshev distance 1), with yaw wrapping around.
+        pairs = [tree.query_pairs(1.0, p=np.inf, output_type="ndarray")]
+        for shift in (n_yaw, -n_yaw):
+            other = cKDTree(uniq.astype(float) + [0.0, 0.0, shift])
+            sdm = tree.sparse_distance_matrix(other, 1.0, p=np.inf, output_type="ndarray")
+            pairs.append(np.column_stack([sdm["i"], sdm["j"]]))
+        edges = np.concatenate(pairs).reshape(-1, 2)
+        graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+        _, labels = connected_components(graph, directed=False)
+        return labels[inverse]
+
+
+class OdometryDrift:
+    """Wheel odometry with drift, for ``n`` skids: true motion in, odometry poses out.
+
+    Each step's true increment ``(rot1, trans, rot2)`` is scaled by a fixed per-robot wheel
+    calibration error, given a heading bias per metre driven (a slightly unequal wheel radius)
+    and perturbed with Thrun's ``alpha`` noise, then integrated onto the odometry pose. The
+    odometry frame starts at the true start poses.
+
+    Parameters
+    ----------
+    start
+        ``(n, 3)`` true start poses.
+    alphas
+        ``(alpha1..alpha4)`` random noise (as in :class:`FilterConfig`).
+    scale_error_std
+        Standard deviation of each robot's fixed translation scale error (e.g. 0.01 = 1 %).
+    yaw_bias_std_rad_per_m
+        Standard deviation of each robot's fixed heading drift per metre driven.
+    rng
+        Random generator (biases are drawn at construction).
+    """
+
+    def __init__(
+        self,
+        start: np.ndarray,
+        *,
+        alphas: tuple[float, float, float, float] = (0.002, 0.002, 0.002, 0.002),
+        scale_error_std: float = 0.01,
+        yaw_bias_std_rad_per_m: float = 0.01,
+        rng: np.random.Generator,
+    ) -> None:
+        start = np.asarray(start, dtype=float).reshape(-1, 3)
+        if any(a < 0 for a in alphas) or scale_error_std < 0 or yaw_bias_std_rad_per_m < 0:
+            raise ValueError(
+                "odometry: alphas, scale_error_std and yaw_bias_std_rad_per_m must be >= 0 "
+                f"(got {alphas}, {scale_error_std}, {yaw_bias_std_rad_per_m})"
+            )
+        self.rng = rng
+        self.alphas = tuple(float(a) for a in alphas)
+        n = len(start)
+        self.scale = 1.0 + scale_error_std * rng.standard_normal(n)
+        self.yaw_bias = yaw_bias_std_rad_per_m * rng.standard_normal(n)
+        self.true_prev = start.copy()
+        self.odom = start.copy()
+
+    def step(self, true_now: np.ndarray) -> np.ndarray:
+        """Advance with the robots' new true poses ``(n, 3)``; returns odometry poses
+        ``(n, 3)`` (a copy)."""
+        true_now = np.asarray(true_now, dtype=float).reshape(self.odom.shape)
+        rot1, trans, rot2 = relative_motion(self.true_prev, true_now)
+        trans = trans * self.scale
+        rot2 = rot2 + self.yaw_bias * trans
+        if any(self.alphas):
+            self.odom = _sample_odometry(self.odom, rot1, trans, rot2, self.alphas, self.rng)
+        else:
+            th = self.odom[:, 2] + rot1
+            self.odom = np.column_stack(
+                [
+                    self.odom[:, 0] + trans * np.cos(th),
+                    self.odom[:, 1] + trans * np.sin(th),
+                    wrap_angle(th + rot2),
+                ]
+            )
+        self.true_prev = true_now.copy()
+        return self.odom.copy()
+
+    def kidnap(self, true_now: np.ndarray) -> None:
+        """Move robots to new true poses ``(n, 3)`` without the odometry noticing (carried)."""
+        self.true_prev = np.asarray(true_now, dtype=float).reshape(self.odom.shape).copy()
