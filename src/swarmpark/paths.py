@@ -8,7 +8,7 @@ Curvature ``k(s)`` gives the angular rate of a unicycle driven along it, ``omega
 
 The arc length of the spline has no closed form, so it is tabulated by Gauss-Legendre
 quadrature (exact to round-off for these smooth pieces) and inverted with a cubic Hermite
-interpolant that uses the exact derivative ``du/ds = 1 / |r'(u)|``.
+estimate (using the exact derivative ``du/ds = 1 / |r'(u)|``) polished by Newton steps.
 
 Examples
 --------
@@ -128,7 +128,6 @@ class SplinePath:
     knot_s: np.ndarray = field(init=False, repr=False)
     _spline: CubicSpline = field(init=False, repr=False)
     _u_of_s: CubicHermiteSpline = field(init=False, repr=False)
-    _d1: object = field(init=False, repr=False)
     _ub: np.ndarray = field(init=False, repr=False)
     _sb: np.ndarray = field(init=False, repr=False)
     _gl: tuple = field(init=False, repr=False)
@@ -208,7 +207,6 @@ class SplinePath:
                 f"({pts.tolist()})"
             )
         set_(self, "_spline", spline)
-        set_(self, "_d1", d1)
         set_(self, "_u_of_s", CubicHermiteSpline(sb, ub, 1.0 / speed_b))
         set_(self, "_ub", ub)
         set_(self, "_sb", sb)
@@ -219,54 +217,64 @@ class SplinePath:
         set_(self, "knot_s", knot_s)
 
     # ----------------------------------------------------------------- evaluation
+    def _r(self, u: np.ndarray, order: int) -> list[np.ndarray]:
+        """``r(u)`` and its derivatives up to ``order``."""
+        return [self._spline(u, nu) for nu in range(order + 1)]
+
     def _u(self, s) -> np.ndarray:
         s = np.asarray(s, dtype=float)
         if not np.all(np.isfinite(s)):
             raise PathError(f"s: arc lengths must be finite (got {s!r})")
         s = np.clip(s, 0.0, self.length_m)
-        u = self._u_of_s(s)
-        # Polish with Newton steps on the exact arc length (quadrature from the tabulated
-        # breakpoint below), kept inside the breakpoint bracket: the Hermite inverse alone
-        # loses accuracy where the speed |r'(u)| varies fast (tight turns).
         ub, sb = self._ub, self._sb
         k = np.clip(np.searchsorted(sb, s, side="right") - 1, 0, sb.size - 2)
         lo, hi = ub[k], ub[k + 1]
+        u = self._u_of_s(s)
+        # Polish with Newton steps on the exact arc length (quadrature from the tabulated
+        # breakpoint below), kept inside the bracket: the Hermite estimate alone loses
+        # accuracy where the speed |r'(u)| varies fast (tight turns).
         nodes, weights = self._gl
         for _ in range(_NEWTON_STEPS):
             u = np.clip(u, lo, hi)
             half = 0.5 * (u - lo)
-            uq = (lo + half)[..., None] + half[..., None] * nodes
-            arc = sb[k] + half * np.sum(weights * np.linalg.norm(self._d1(uq), axis=-1), axis=-1)
-            speed = np.linalg.norm(self._d1(u), axis=-1)
-            u = u - (arc - s) / speed
+            uq = np.concatenate(
+                [(lo + half)[..., None] + half[..., None] * nodes, u[..., None]], -1
+            )
+            speed = np.linalg.norm(self._spline(uq, 1), axis=-1)
+            arc = sb[k] + half * np.sum(weights * speed[..., :-1], axis=-1)
+            u = u - (arc - s) / speed[..., -1]
         return np.clip(u, lo, hi)
 
     def position(self, s) -> np.ndarray:
         """Points ``(..., 2)`` at arc lengths ``s``."""
-        return self._spline(self._u(s))
+        return self._r(self._u(s), 0)[0]
 
     def tangent(self, s) -> np.ndarray:
         """Unit tangents ``(..., 2)`` (``(cos theta, sin theta)``) at arc lengths ``s``."""
-        d = self._spline(self._u(s), 1)
+        d = self._r(self._u(s), 1)[1]
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def heading(self, s) -> np.ndarray:
         """Headings ``theta`` (radians, CCW from +x, in ``(-pi, pi]``) at arc lengths ``s``."""
-        d = self._spline(self._u(s), 1)
+        d = self._r(self._u(s), 1)[1]
         return np.arctan2(d[..., 1], d[..., 0])
 
     def curvature(self, s) -> np.ndarray:
         """Signed curvature ``k`` (1/m, positive turning left) at arc lengths ``s``."""
-        u = self._u(s)
-        d1, d2 = self._spline(u, 1), self._spline(u, 2)
-        cross = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
-        return cross / np.linalg.norm(d1, axis=-1) ** 3
+        return self.frame(s)[1]
 
     def pose(self, s) -> np.ndarray:
         """Poses ``(..., 3)`` = ``(x, y, theta)``, the path function ``f(s)`` of eq. (8)."""
-        u = self._u(s)
-        p, d = self._spline(u), self._spline(u, 1)
+        p, d = self._r(self._u(s), 1)
         return np.concatenate([p, np.arctan2(d[..., 1], d[..., 0])[..., None]], axis=-1)
+
+    def frame(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """Poses ``(..., 3)`` and curvatures ``(...)`` at arc lengths ``s`` in one pass."""
+        p, d1, d2 = self._r(self._u(s), 2)
+        cross = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
+        kappa = cross / np.linalg.norm(d1, axis=-1) ** 3
+        pose = np.concatenate([p, np.arctan2(d1[..., 1], d1[..., 0])[..., None]], axis=-1)
+        return pose, kappa
 
     def table(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Samples at ``n`` evenly spaced arc lengths: ``s`` ``(n,)`` and ``(n, 4)`` columns
@@ -275,4 +283,5 @@ class SplinePath:
             raise PathError(f"n: need at least 2 samples (got {n})")
         s = np.linspace(0.0, self.length_m, n)
         u = self._u(s)
-        return s, np.concatenate([self._spline(u), self.tangent(s)], axis=-1)
+        p, d = self._r(u, 1)
+        return s, np.concatenate([p, d / np.linalg.norm(d, axis=-1, keepdims=True)], axis=-1)

@@ -875,8 +875,7 @@ def sample_reference(plan: FormationPlan, t) -> Reference:
     poses = np.empty((flat.size, plan.problem.n_robots, 3))
     kappa = np.empty((flat.size, plan.problem.n_robots))
     for i, p in enumerate(plan.problem.paths):
-        poses[:, i] = p.pose(s[:, i])
-        kappa[:, i] = p.curvature(s[:, i])
+        poses[:, i], kappa[:, i] = p.frame(s[:, i])
     omega = kappa * v
     shape = t_arr.shape
     return Reference(
