@@ -50,7 +50,7 @@ from swarmpark.paths import SplinePath
 __all__ = [
     "FormationProblem",
     "FormationPlan",
-    "FormationError",
+    "FormationMetrics",
     "Reference",
     "TrackingGains",
     "ObstacleAdjustment",
@@ -349,7 +349,7 @@ def pair_errors(problem: FormationProblem, poses, s) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class FormationError:
+class FormationMetrics:
     """Formation error of a motion sampled at ``times_s``.
 
     Attributes
@@ -372,7 +372,7 @@ class FormationError:
     max_pair_error_m: float
 
 
-def formation_metrics(problem: FormationProblem, times_s, poses, s) -> FormationError:
+def formation_metrics(problem: FormationProblem, times_s, poses, s) -> FormationMetrics:
     """Formation error of poses ``(T, R, 3)`` with travel distances ``(T, R)`` at ``times_s``.
 
     Use it on a simulated run: pass the skids' actual poses and the reference ``s`` of
@@ -383,7 +383,7 @@ def formation_metrics(problem: FormationProblem, times_s, poses, s) -> Formation
     sq = np.sum(err**2, axis=(-1, -2))  # (T,)
     norms = np.linalg.norm(err, axis=-1).T  # (E, T)
     integral = float(np.sum(0.5 * (sq[1:] + sq[:-1]) * np.diff(times))) if times.size > 1 else 0.0
-    return FormationError(
+    return FormationMetrics(
         times_s=times,
         pair_error_m=norms,
         q_e_m2=float(sq.sum()),
@@ -646,8 +646,8 @@ def _solve_nlp(
 
 
 # --------------------------------------------------------------------------- leader-follower
-def _tree_order(problem: FormationProblem) -> list[tuple[int, int]]:
-    """Edges ``(leader, follower)`` in breadth-first order from ``problem.leader``."""
+def _tree_order(problem: FormationProblem) -> list[tuple[int, int, int]]:
+    """Edges ``(edge, leader, follower)`` in breadth-first order from ``problem.leader``."""
     parent: dict[int, int] = {}
     for e, (i, j) in enumerate(problem.edges.tolist()):
         if j in parent or j == problem.leader:
@@ -808,7 +808,7 @@ def plan_velocities(
     return _make_plan(problem, method, v, s, ok, status, iters)
 
 
-def formation_error(plan: FormationPlan, times_s=None) -> FormationError:
+def formation_error(plan: FormationPlan, times_s=None) -> FormationMetrics:
     """Formation error of a plan (warp included) sampled at ``times_s``.
 
     By default the samples are ``0, dt, 2 dt, ...`` up to the plan's duration, i.e. the
