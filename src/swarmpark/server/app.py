@@ -1,0 +1,163 @@
+"""The FastAPI application: app factory, static UI, validation errors that name the field.
+
+Layering: the server imports the core (scenario, supervisor, layout); the core never imports
+the server. All endpoints that touch the supervisor are coroutines on the event loop that
+also runs the pacing task, so commands are applied between ticks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from .engine import Session
+from .routers import commands, sim, state
+
+__all__ = [
+    "create_app",
+    "default_scenarios_dir",
+    "default_scenario",
+    "STATIC_DIR",
+    "DEFAULT_SCENARIO",
+]
+
+STATIC_DIR = Path(__file__).parent / "static"
+DEFAULT_SCENARIO = "hangar-park.yaml"
+
+API_DESCRIPTION = """\
+Operator interface of swarmpark (Hing et al. 2018, Figs. 2-3): select skids, draw a parking
+boundary, preview and confirm a park, give manual goals, stop/resume, e-stop, teleoperate.
+
+* Poses are `[x_m, y_m, heading_deg]` (degrees, as in the scenario files); velocities SI.
+* A command the supervisor refuses answers **HTTP 409** with `accepted: false` and the
+  `reason`; nothing changes. Accepted commands answer 200 with `accepted: true`.
+* A malformed request answers **422**; `message` names the field (unknown keys included).
+* With a token, every POST needs `Authorization: Bearer <token>` (401 otherwise) except
+  `POST /api/estop`; GETs and the WebSocket `/api/ws` are open (read-only viewers).
+"""
+
+
+def default_scenarios_dir() -> Path:
+    """Where scenarios are looked for: ``./scenarios`` if it exists, else the ``scenarios/``
+    of the repository checkout this package runs from, else ``swarmpark/data/scenarios``
+    inside the installed package (the last one is returned even if missing)."""
+    here = Path(__file__).resolve()
+    candidates = [
+        Path.cwd() / "scenarios",
+        here.parents[3] / "scenarios",  # src/swarmpark/server/app.py -> repository root
+        here.parents[1] / "data" / "scenarios",
+    ]
+    for c in candidates:
+        if c.is_dir():
+            return c
+    return candidates[-1]
+
+
+def default_scenario(scenarios_dir: Path) -> Path:
+    """``hangar-park.yaml`` in ``scenarios_dir``; raises FileNotFoundError naming it."""
+    path = scenarios_dir / DEFAULT_SCENARIO
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"scenario: none given and the default {str(path)!r} does not exist"
+        )
+    return path
+
+
+def _field(loc) -> str:
+    parts = [str(p) for p in loc]
+    if parts and parts[0] in ("body", "query", "path", "header"):
+        parts = parts[1:]
+    out = ""
+    for p in parts:
+        out += f"[{p}]" if p.isdigit() else ("." if out else "") + p
+    return out or "body"
+
+
+async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+    """FastAPI's 422 body plus ``message``: the first error as ``field: what (got value)``."""
+    errors = exc.errors()
+    first = errors[0] if errors else {"loc": (), "msg": "invalid request", "type": ""}
+    field = _field(first.get("loc", ()))
+    msg = str(first.get("msg", "")).removeprefix("Value error, ")
+    if first.get("type") == "extra_forbidden":
+        msg = "unknown key"
+    shown = first.get("input")
+    more = f" ({len(errors) - 1} more error(s))" if len(errors) > 1 else ""
+    message = f"{field}: {msg} (got {shown!r}){more}"
+    return JSONResponse(
+        status_code=422, content={"message": message, "detail": jsonable_encoder(errors)}
+    )
+
+
+def create_app(
+    scenario_path: str | Path | None = None,
+    *,
+    token: str | None = None,
+    scenarios_dir: str | Path | None = None,
+    speed: float = 1.0,
+    autostart: bool = True,
+    scripted: bool = True,
+) -> FastAPI:
+    """Build the operator-interface app for one scenario.
+
+    Parameters
+    ----------
+    scenario_path
+        Scenario YAML; ``None`` loads ``hangar-park.yaml`` from ``scenarios_dir``.
+    token
+        If given, control commands need ``Authorization: Bearer <token>``; viewers without
+        it are read-only (they may still press the e-stop).
+    scenarios_dir
+        Directory the scenario picker lists; ``None``: :func:`default_scenarios_dir`.
+    speed
+        Initial simulation speed factor.
+    autostart
+        Run the simulation as soon as the server starts; ``False`` starts it paused.
+    scripted
+        Run the scenario's own timed commands.
+
+    Raises
+    ------
+    swarmpark.scenario.ScenarioError
+        The scenario is invalid. FileNotFoundError: no scenario given and no default.
+    """
+    sdir = Path(scenarios_dir) if scenarios_dir is not None else default_scenarios_dir()
+    path = Path(scenario_path) if scenario_path is not None else default_scenario(sdir)
+    if token is not None and not token.strip():
+        raise ValueError("token: must not be empty")
+    session = Session(path, speed=speed, running=autostart, scripted=scripted)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI):
+        session.start()
+        try:
+            yield
+        finally:
+            await session.stop()
+
+    app = FastAPI(
+        title="swarmpark operator interface",
+        version="1",
+        description=API_DESCRIPTION,
+        lifespan=lifespan,
+    )
+    app.state.session = session
+    app.state.token = token
+    app.state.scenarios_dir = sdir.resolve()
+    app.add_exception_handler(RequestValidationError, _validation_error)  # type: ignore[arg-type]
+    app.include_router(sim.router)
+    app.include_router(commands.router)
+    app.include_router(state.router)
+
+    @app.get("/", include_in_schema=False)
+    async def index():
+        return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-cache"})
+
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+    return app

@@ -1,0 +1,122 @@
+"""``swarmpark serve``: run the operator interface with uvicorn.
+
+Binds 127.0.0.1 by default; ``--host 0.0.0.0`` exposes it on the ship's network, where
+``--token`` should guard the controls. Exit codes: 0 after a clean shutdown, 2 bad input
+(one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import math
+import sys
+
+__all__ = ["serve_command", "build_parser"]
+
+EXIT_OK, EXIT_BAD_INPUT = 0, 2
+
+
+class _BadInput(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # type: ignore[override]
+        raise _BadInput(f"{self.prog}: error: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .schemas import MAX_SPEED_FACTOR, MIN_SPEED_FACTOR
+
+    p = _Parser(
+        prog="swarmpark serve",
+        description="Serve the operator interface (map view, park, goals, e-stop, teleop).",
+    )
+    p.add_argument(
+        "scenario",
+        nargs="?",
+        help="scenario YAML (default: hangar-park.yaml in the scenarios directory)",
+    )
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=8000, help="TCP port (default 8000)")
+    p.add_argument("--token", help="control commands need this token; others are read-only")
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help=f"simulated seconds per wall second ({MIN_SPEED_FACTOR}..{MAX_SPEED_FACTOR})",
+    )
+    p.add_argument("--scenarios-dir", help="directory the scenario picker lists")
+    p.add_argument("--paused", action="store_true", help="start with the simulation paused")
+    p.add_argument(
+        "--no-script", action="store_true", help="ignore the scenario's own timed commands"
+    )
+    return p
+
+
+def _check(args) -> None:
+    from .schemas import MAX_SPEED_FACTOR, MIN_SPEED_FACTOR
+
+    if not 0 < args.port < 65536:
+        raise _BadInput(f"swarmpark serve: error: --port must be 1..65535 (got {args.port})")
+    if not (math.isfinite(args.speed) and MIN_SPEED_FACTOR <= args.speed <= MAX_SPEED_FACTOR):
+        raise _BadInput(
+            f"swarmpark serve: error: --speed must be {MIN_SPEED_FACTOR}..{MAX_SPEED_FACTOR} "
+            f"(got {args.speed})"
+        )
+    if args.token is not None and not args.token.strip():
+        raise _BadInput("swarmpark serve: error: --token must not be empty")
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def serve_command(argv: list[str]) -> int:
+    """Parse ``argv`` (the words after ``serve``), build the app and run it until Ctrl-C."""
+    from ..scenario import ScenarioError
+    from .app import create_app
+
+    try:
+        try:
+            args = build_parser().parse_args(argv)
+        except SystemExit as exc:  # -h / --help printed the usage
+            return int(exc.code or 0)
+        _check(args)
+        app = create_app(
+            args.scenario,
+            token=args.token,
+            scenarios_dir=args.scenarios_dir,
+            speed=args.speed,
+            autostart=not args.paused,
+            scripted=not args.no_script,
+        )
+    except _BadInput as exc:
+        sys.stderr.write(f"{exc}\n")
+        return EXIT_BAD_INPUT
+    except (ScenarioError, FileNotFoundError, ValueError) as exc:
+        sys.stderr.write(f"swarmpark serve: error: {exc}\n")
+        return EXIT_BAD_INPUT
+    import uvicorn
+
+    if not _is_loopback(args.host) and args.token is None:
+        sys.stderr.write(
+            f"swarmpark serve: warning: listening on {args.host} without --token: "
+            "anyone on the network can command the swarm\n"
+        )
+    shown = f"[{args.host}]" if ":" in args.host else args.host
+    sys.stderr.write(f"swarmpark serve: operator interface on http://{shown}:{args.port}/\n")
+    try:
+        uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+    except OSError as exc:  # address not available
+        sys.stderr.write(f"swarmpark serve: error: {exc}\n")
+        return EXIT_BAD_INPUT
+    except SystemExit as exc:  # uvicorn exits 1 when it cannot bind (it logged why)
+        return EXIT_BAD_INPUT if exc.code else EXIT_OK
+    return EXIT_OK

@@ -1,0 +1,333 @@
+"""The served simulation: one supervisor, paced by real time, and the clients watching it.
+
+The core stays deterministic: :class:`Session` calls :meth:`Supervisor.tick` at fixed steps
+from one asyncio task; pacing, the speed factor and pause live here. API handlers are
+coroutines on the same event loop, so a command always lands *between* two ticks and no
+two pieces of code ever touch the supervisor at once (no threads).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..scenario import World, build_world, load_scenario
+from ..supervisor import TELEOP_TIMEOUT_S, Outcome, Supervisor
+from .frames import FrameEncoder, map_png, world_info
+
+__all__ = ["Session", "Client", "FRAME_HZ", "TELEOP_DEADMAN_S"]
+
+log = logging.getLogger("swarmpark.server")
+
+#: State frames per wall second sent to the browsers.
+FRAME_HZ = 20.0
+#: Most ticks run between two frames; beyond that the simulation falls behind real time
+#: (it slows down) instead of freezing the server to catch up.
+MAX_TICKS_PER_FRAME = 40
+#: A teleop command is re-applied while the operator sent it within this many wall seconds
+#: (the dead-man: a closed tab or a dropped link stops the skid).
+TELEOP_DEADMAN_S = 0.5
+#: Frames a slow client may have queued before older ones are dropped.
+CLIENT_QUEUE = 4
+#: Wall-clock tick timings kept for the status panel.
+TICK_HISTORY = 200
+#: Paced frames kept for GET /api/perf.
+PERF_HISTORY = 2000
+
+
+@dataclass(eq=False)
+class Client:
+    """One WebSocket viewer: a small queue of encoded frames, and whether it needs a full one."""
+
+    queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
+    needs_full: bool = True
+    dropped: int = 0
+
+    def offer(self, delta: str, full: str | None) -> None:
+        msg = full if self.needs_full else delta
+        if msg is None:
+            return
+        if self.queue.full():
+            # A dropped delta may have carried a slow part: resend everything next time.
+            while not self.queue.empty():
+                self.queue.get_nowait()
+                self.dropped += 1
+            self.needs_full = True
+            if full is None:
+                return
+            msg = full
+        self.queue.put_nowait(msg)
+        if msg is full:
+            self.needs_full = False
+
+
+class Session:
+    """A scenario being served: the supervisor, the pacing, the frames and the viewers.
+
+    Parameters
+    ----------
+    scenario_path
+        Scenario YAML to load.
+    speed
+        Simulated seconds per wall second.
+    running
+        Start ticking as soon as the pacing task runs (else start paused).
+    scripted
+        Run the scenario's own timed commands (else the operator gives every command).
+    """
+
+    def __init__(
+        self,
+        scenario_path: str | Path,
+        *,
+        speed: float = 1.0,
+        running: bool = True,
+        scripted: bool = True,
+    ) -> None:
+        self.speed = float(speed)
+        self.paused = not running
+        self.rev = 0
+        self.seq = 0
+        self.error: str | None = None
+        self.clients: set[Client] = set()
+        self.tick_ms: deque[float] = deque(maxlen=TICK_HISTORY)
+        self.frame_ms: deque[float] = deque(maxlen=TICK_HISTORY)
+        #: Per paced frame: (ticks run, CPU ms of ticks + broadcast, delta bytes).
+        self.perf: deque[tuple[int, float, int]] = deque(maxlen=PERF_HISTORY)
+        self.frames_sent = 0
+        self.last_message_bytes = 0
+        self._task: asyncio.Task | None = None
+        self._budget_s = 0.0
+        self._rate = 0.0
+        self.load(scenario_path, scripted=scripted)
+
+    # ------------------------------------------------------------------ scenario
+
+    def load(self, path: str | Path, *, scripted: bool = True) -> None:
+        """Load a scenario (raises :class:`~swarmpark.scenario.ScenarioError`, changing
+        nothing, if it is bad)."""
+        path = Path(path)
+        scn = load_scenario(path)
+        if not scripted:
+            scn = scn.model_copy(update={"commands": []})
+        world = build_world(scn)
+        self.path, self.scripted, self.world = path.resolve(), scripted, world
+        self._start(world)
+
+    def reset(self) -> None:
+        """Start the current scenario over (same world, a fresh supervisor)."""
+        self._start(self.world)
+
+    def _start(self, world: World) -> None:
+        self.sup = Supervisor(world)
+        self.encoder = FrameEncoder(self.sup)
+        self.rev += 1
+        self.error = None
+        self._teleop: dict[str, tuple[float, float, float, float]] = {}
+        self._budget_s = 0.0
+        self._world_info = {"rev": self.rev, **self.describe(), **world_info(self.sup)}
+        self._map_png: bytes | None = None
+        for c in self.clients:
+            c.needs_full = True
+
+    def describe(self) -> dict:
+        scn = self.world.scenario
+        return {
+            "scenario": scn.name,
+            "file": self.path.name,
+            "scripted": self.scripted,
+            "dt_s": scn.dt_s,
+            "duration_s": scn.duration_s,
+        }
+
+    def world_info(self) -> dict:
+        return self._world_info
+
+    def map_png(self) -> bytes:
+        if self._map_png is None:
+            self._map_png = map_png(self.sup)
+        return self._map_png
+
+    def status(self) -> dict:
+        return {
+            **self.describe(),
+            "rev": self.rev,
+            "t_s": round(self.sup.t, 3),
+            "paused": self.paused,
+            "speed": self.speed,
+            "ticks": self.sup.sim.tick,
+            "error": self.error,
+        }
+
+    # ------------------------------------------------------------------ commands
+
+    def command(self, outcome: Outcome) -> Outcome:
+        """Record that a command was applied (frames show its effect at once)."""
+        self.encoder.metrics_now = True
+        return outcome
+
+    def teleop(self, robot: str, v: float, omega: float) -> Outcome:
+        out = self.sup.set_teleop(robot, v, omega)
+        if out.accepted:
+            self._teleop[robot] = (v, omega, time.monotonic(), self.sup.t)
+        return self.command(out)
+
+    def release(self, robot: str) -> Outcome:
+        self._teleop.pop(robot, None)
+        return self.command(self.sup.release(robot))
+
+    def _keep_teleop_alive(self) -> None:
+        """Re-send held teleop commands before the supervisor's own timeout (sim time) runs
+        out, for as long as the operator keeps sending them (wall time): at a speed factor
+        above one, sim time outruns the operator's key repeat."""
+        now = time.monotonic()
+        for robot, (v, w, wall, sim_t) in list(self._teleop.items()):
+            if now - wall > TELEOP_DEADMAN_S or not self.sup.teleop[self.sup.index[robot]]:
+                del self._teleop[robot]
+            elif self.sup.t - sim_t >= 0.5 * TELEOP_TIMEOUT_S:
+                self.sup.set_teleop(robot, v, w)
+                self._teleop[robot] = (v, w, wall, self.sup.t)
+
+    # ------------------------------------------------------------------ ticking
+
+    def tick(self) -> None:
+        """One fixed step of the core (timed for the status panel)."""
+        self._keep_teleop_alive()
+        t0 = time.perf_counter()
+        self.sup.tick()
+        self.tick_ms.append((time.perf_counter() - t0) * 1e3)
+
+    def step(self, ticks: int) -> None:
+        for _ in range(ticks):
+            self.tick()
+        self.encoder.metrics_now = True
+
+    def advance(self, wall_elapsed_s: float) -> int:
+        """Run the ticks due after ``wall_elapsed_s`` of wall time; returns how many ran."""
+        if self.paused or self.error:
+            self._budget_s = 0.0
+            return 0
+        dt = self.sup.sim.dt
+        self._budget_s += wall_elapsed_s * self.speed
+        n = 0
+        while self._budget_s >= dt - 1e-9 and n < MAX_TICKS_PER_FRAME:
+            self.tick()
+            self._budget_s -= dt
+            n += 1
+        if n == MAX_TICKS_PER_FRAME:
+            self._budget_s = min(self._budget_s, dt)  # fall behind rather than pile up
+        return n
+
+    # ------------------------------------------------------------------ frames
+
+    def sim_extra(self) -> dict:
+        ticks = list(self.tick_ms)
+        return {
+            "rev": self.rev,
+            "seq": self.seq,
+            "sim": {
+                "paused": self.paused,
+                "speed": self.speed,
+                "rate": round(self._rate, 2),
+                "tick_ms": round(float(np.mean(ticks)), 2) if ticks else None,
+                "error": self.error,
+            },
+        }
+
+    def snapshot(self) -> dict:
+        """A full frame without disturbing the change tracking of the broadcast."""
+        enc = FrameEncoder(self.sup)
+        _, full = enc.frame(self.sim_extra(), want_delta=False, want_full=True)
+        return full  # type: ignore[return-value]
+
+    def broadcast(self) -> int:
+        """Encode one frame and queue it to every client; returns the delta's size in bytes."""
+        if not self.clients:
+            return 0
+        t0 = time.perf_counter()
+        self.seq += 1
+        want_full = any(c.needs_full for c in self.clients)
+        delta, full = self.encoder.frame(self.sim_extra(), want_full=want_full)
+        d_msg = json.dumps(delta, separators=(",", ":"))
+        f_msg = json.dumps(full, separators=(",", ":")) if full is not None else None
+        for c in self.clients:
+            c.offer(d_msg, f_msg)
+        self.last_message_bytes = len(d_msg)
+        self.frames_sent += 1
+        self.frame_ms.append((time.perf_counter() - t0) * 1e3)
+        return len(d_msg)
+
+    def perf_report(self) -> dict:
+        """Server load over the last :data:`PERF_HISTORY` paced frames."""
+        rows = list(self.perf)
+        ticks = sum(r[0] for r in rows)
+        cpu = [r[1] for r in rows]
+        sizes = [r[2] for r in rows if r[2] > 0]
+        return {
+            "frames": len(rows),
+            "ticks": ticks,
+            "clients": len(self.clients),
+            "robots": self.sup.sim.n,
+            "cpu_ms_per_tick": round(sum(cpu) / ticks, 3) if ticks else None,
+            "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 3) if cpu else None,
+            "cpu_ms_per_frame_p99": round(float(np.percentile(cpu, 99)), 3) if cpu else None,
+            "tick_ms_mean": round(float(np.mean(self.tick_ms)), 3) if self.tick_ms else None,
+            "encode_ms_mean": round(float(np.mean(self.frame_ms)), 3) if self.frame_ms else None,
+            "message_bytes_mean": round(float(np.mean(sizes)), 1) if sizes else None,
+            "message_bytes_max": max(sizes) if sizes else None,
+            "process_cpu_s": round(time.process_time(), 4),
+            "frames_sent": self.frames_sent,
+            "sim_t_s": round(self.sup.t, 3),
+        }
+
+    # ------------------------------------------------------------------ the pacing task
+
+    async def run(self) -> None:
+        """Tick at the speed factor and broadcast at :data:`FRAME_HZ` until cancelled."""
+        loop = asyncio.get_running_loop()
+        period = 1.0 / FRAME_HZ
+        last = loop.time()
+        next_frame = last
+        rate_t, rate_sim = last, self.sup.t
+        while True:
+            now = loop.time()
+            elapsed, last = now - last, now
+            cpu0 = time.process_time()
+            ran = 0
+            try:
+                # After a stall (a laptop lid, a long plan) do not race to catch up.
+                ran = self.advance(min(elapsed, 5 * period))
+            except Exception as exc:  # keep serving: the operator must see what happened
+                log.exception("simulation tick failed")
+                self.error = f"simulation stopped: {type(exc).__name__}: {exc}"
+                self.paused = True
+            if now - rate_t >= 1.0:
+                sim_dt = self.sup.t - rate_sim
+                self._rate = sim_dt / (now - rate_t) if sim_dt >= 0 else 0.0
+                rate_t, rate_sim = now, self.sup.t
+            nbytes = self.broadcast()
+            self.perf.append((ran, (time.process_time() - cpu0) * 1e3, nbytes))
+            next_frame += period
+            delay = next_frame - loop.time()
+            if delay < 0:
+                next_frame, delay = loop.time(), 0.0
+            await asyncio.sleep(delay)
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self.run(), name="swarmpark-sim")
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None

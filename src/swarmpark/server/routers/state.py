@@ -1,0 +1,98 @@
+"""State for viewers (no token needed): the static world, the map image, the current frame,
+and the WebSocket that streams frames."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+
+from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
+from fastapi.responses import Response
+
+from ..deps import SessionDep, has_control
+from ..engine import Client, Session
+from ..schemas import AuthStatus
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api", tags=["state"])
+
+
+@router.get("/world", summary="What does not change while a scenario runs")
+async def world(session: SessionDep) -> dict:
+    """Robot ids and footprints, the state names (frames send their index), the map geometry
+    (the image is ``GET /api/map``), exact walls and obstacles, and ``rev``, which changes
+    when a scenario is loaded or reset."""
+    return session.world_info()
+
+
+@router.get(
+    "/map",
+    summary="The occupancy map as a PNG (one pixel per cell, north up)",
+    response_class=Response,
+    responses={200: {"content": {"image/png": {}}}},
+)
+async def map_image(session: SessionDep):
+    """Free cells white, occupied dark grey, unknown light grey. ``GET /api/world`` gives
+    its placement: ``map.bounds_m`` = ``[xmin, ymin, xmax, ymax]``."""
+    return Response(
+        session.map_png(), media_type="image/png", headers={"Cache-Control": "no-cache"}
+    )
+
+
+@router.get("/state", summary="The current state as one full frame")
+async def state(session: SessionDep) -> dict:
+    """Same content as a full WebSocket frame (see docs/ui.md for the fields)."""
+    return session.snapshot()
+
+
+@router.get("/perf", summary="Server load: CPU per tick, frame sizes, tick times")
+async def perf(session: SessionDep) -> dict:
+    """Over the last 2000 paced frames: CPU (process time) of the ticks plus the broadcast,
+    per tick and per frame; the mean and largest delta message; ``process_cpu_s`` is the
+    server process's CPU time so far (sample it twice for the whole server's load)."""
+    return session.perf_report()
+
+
+@router.get("/auth", response_model=AuthStatus, summary="Does this client hold the token?")
+async def auth(request: Request):
+    return AuthStatus(
+        token_required=request.app.state.token is not None, control=has_control(request)
+    )
+
+
+@router.websocket("/ws")
+async def stream(ws: WebSocket):
+    """Frames as JSON text at 20 Hz: a full one first, then deltas (see docs/ui.md).
+
+    The stream is read-only; commands go through the REST endpoints.
+    """
+    session: Session = ws.app.state.session
+    await ws.accept()
+    client = Client()
+    session.clients.add(client)
+    # A viewer that joins while nothing runs (a paused sim, no pacing task) sees the state.
+    # (A fresh encoder: the broadcast's change tracking stays as the other viewers saw it.)
+    await ws.send_text(json.dumps(session.snapshot(), separators=(",", ":")))
+    client.needs_full = False
+
+    async def sender() -> None:
+        while True:
+            await ws.send_text(await client.queue.get())
+
+    async def receiver() -> None:
+        with contextlib.suppress(WebSocketDisconnect):
+            while True:
+                await ws.receive_text()  # nothing is expected; this notices the close
+
+    tasks = [asyncio.ensure_future(sender()), asyncio.ensure_future(receiver())]
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        session.clients.discard(client)
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError):
+                await t

@@ -1,0 +1,869 @@
+// swarmpark operator interface (Hing et al. 2018, Figs. 2-3) in plain JS on a canvas.
+// State arrives over the WebSocket /api/ws (a full frame, then deltas); commands go to the
+// REST API. World frame: x right, y up, yaw counter-clockwise; angles in degrees here.
+"use strict";
+
+const STATE_COLOURS = {
+  idle: "#8a939c", moving: "#3ea6ff", parked: "#3fbf5f", stopped: "#f0a020",
+  estopped: "#e0242c", teleop: "#a66bff", stuck: "#ff4fd8",
+};
+const PATH_COLOUR = "#4cd964";
+const SPEED_MIN = 0.05, SPEED_MAX = 100;
+const TELEOP_PERIOD_MS = 100;
+const GAMEPAD_DEADZONE = 0.15;
+
+// ------------------------------------------------------------------ state
+
+const S = {
+  world: null,          // GET /api/world
+  mapImg: null,         // the occupancy map image
+  frame: null,          // latest frame merged with the slow parts
+  frames: [],           // recent frames (t_s, estop, robots) for tests and debugging
+  selection: new Set(),
+  tool: "select",
+  drawing: null,        // {kind: "polygon"|"rect"|"box"|"goal", ...}
+  boundary: null,       // [[x, y], ...] closed parking boundary (world metres)
+  preview: null,        // {goals, ...} or {error}
+  previewSeq: 0,
+  view: { cx: 0, cy: 0, scale: 40 },   // world point at the canvas centre, px per metre
+  pan: null,
+  mouse: null,          // last mouse position in world coordinates
+  token: sessionStorage.getItem("swarmpark-token") || "",
+  control: true,
+  tokenRequired: false,
+  teleop: { robot: null, keys: new Set(), timer: null, last: [0, 0] },
+  dirty: true,
+  scenarios: [],
+};
+
+const $ = (id) => document.getElementById(id);
+const canvas = $("map");
+const ctx = canvas.getContext("2d");
+
+// ------------------------------------------------------------------ helpers
+
+function toast(msg, ok = false) {
+  const t = $("toast");
+  t.textContent = msg;
+  t.className = ok ? "ok" : "";
+  clearTimeout(toast.timer);
+  toast.timer = setTimeout(() => t.classList.add("hidden"), ok ? 2000 : 6000);
+}
+
+function ids() { return S.world ? S.world.robots.map((r) => r.id) : []; }
+function stateName(code) { return S.world ? S.world.states[code] : "?"; }
+function deg(r) { return (r * 180) / Math.PI; }
+function rad(d) { return (d * Math.PI) / 180; }
+
+async function api(path, body, method = "POST") {
+  const headers = { "Content-Type": "application/json" };
+  if (S.token) headers.Authorization = "Bearer " + S.token;
+  let res;
+  try {
+    res = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  } catch (e) {
+    toast("no connection to the server");
+    return { ok: false, status: 0, data: null };
+  }
+  let data = null;
+  try { data = await res.json(); } catch (e) { /* empty body */ }
+  return { ok: res.ok, status: res.status, data };
+}
+
+function why(r) {
+  const d = r.data || {};
+  if (r.status === 409 && d.reason) return "refused: " + d.reason;
+  if (d.message) return d.message;
+  if (typeof d.detail === "string") return d.detail;
+  return "HTTP " + r.status;
+}
+
+// A command: show the reason if it was refused or malformed.
+async function command(path, body, okMsg) {
+  const r = await api(path, body);
+  if (!r.ok) toast(why(r));
+  else if (okMsg) toast(okMsg, true);
+  return r;
+}
+
+// ------------------------------------------------------------------ view transform
+
+function resize() {
+  const dpr = window.devicePixelRatio || 1;
+  const r = canvas.getBoundingClientRect();
+  canvas.width = Math.max(1, Math.round(r.width * dpr));
+  canvas.height = Math.max(1, Math.round(r.height * dpr));
+  S.dirty = true;
+}
+
+function cssSize() { const r = canvas.getBoundingClientRect(); return [r.width, r.height]; }
+
+function toScreen(x, y) {
+  const [w, h] = cssSize();
+  return [(x - S.view.cx) * S.view.scale + w / 2, h / 2 - (y - S.view.cy) * S.view.scale];
+}
+
+function toWorld(px, py) {
+  const [w, h] = cssSize();
+  return [S.view.cx + (px - w / 2) / S.view.scale, S.view.cy - (py - h / 2) / S.view.scale];
+}
+
+function fit() {
+  if (!S.world) return;
+  const [x0, y0, x1, y1] = S.world.map.bounds_m;
+  const [w, h] = cssSize();
+  S.view.cx = (x0 + x1) / 2;
+  S.view.cy = (y0 + y1) / 2;
+  S.view.scale = Math.max(1, 0.94 * Math.min(w / (x1 - x0), h / (y1 - y0)));
+  S.dirty = true;
+}
+
+function zoomAt(px, py, factor) {
+  const [wx, wy] = toWorld(px, py);
+  S.view.scale = Math.min(2000, Math.max(0.5, S.view.scale * factor));
+  const [nx, ny] = toWorld(px, py);
+  S.view.cx += wx - nx;
+  S.view.cy += wy - ny;
+  S.dirty = true;
+}
+
+function eventXY(ev) {
+  const r = canvas.getBoundingClientRect();
+  return [ev.clientX - r.left, ev.clientY - r.top];
+}
+
+// ------------------------------------------------------------------ geometry
+
+function footprintCorners(i, x, y, yawDeg) {
+  const fp = S.world.robots[i];
+  const r = -fp.pivot_from_rear_m, f = fp.length_m - fp.pivot_from_rear_m, hw = fp.width_m / 2;
+  const c = Math.cos(rad(yawDeg)), s = Math.sin(rad(yawDeg));
+  return [[r, -hw], [f, -hw], [f, hw], [r, hw]].map(([bx, by]) => [x + c * bx - s * by, y + s * bx + c * by]);
+}
+
+function centre(i, x, y, yawDeg) {
+  const fp = S.world.robots[i];
+  const off = fp.length_m / 2 - fp.pivot_from_rear_m;
+  return [x + off * Math.cos(rad(yawDeg)), y + off * Math.sin(rad(yawDeg))];
+}
+
+function insidePolygon(pt, poly) {
+  let inside = false;
+  for (let i = 0, j = poly.length - 1; i < poly.length; j = i++) {
+    const [xi, yi] = poly[i], [xj, yj] = poly[j];
+    if ((yi > pt[1]) !== (yj > pt[1]) && pt[0] < ((xj - xi) * (pt[1] - yi)) / (yj - yi) + xi) inside = !inside;
+  }
+  return inside;
+}
+
+function robotAt(wx, wy) {
+  if (!S.frame) return null;
+  const robots = S.frame.robots;
+  // Topmost last: search backwards, and accept a few pixels of slack for small skids.
+  const slack = 4 / S.view.scale;
+  for (let i = robots.length - 1; i >= 0; i--) {
+    const [x, y, h] = robots[i];
+    const poly = footprintCorners(i, x, y, h);
+    if (insidePolygon([wx, wy], poly)) return i;
+    const [cx, cy] = centre(i, x, y, h);
+    if (Math.hypot(wx - cx, wy - cy) < slack) return i;
+  }
+  return null;
+}
+
+// ------------------------------------------------------------------ drawing
+
+function pathPolygon(pts, close) {
+  ctx.beginPath();
+  pts.forEach(([x, y], k) => {
+    const [sx, sy] = toScreen(x, y);
+    if (k === 0) ctx.moveTo(sx, sy); else ctx.lineTo(sx, sy);
+  });
+  if (close) ctx.closePath();
+}
+
+function drawFootprint(i, x, y, h, fill, stroke, width = 1, dash = null) {
+  pathPolygon(footprintCorners(i, x, y, h), true);
+  if (fill) { ctx.fillStyle = fill; ctx.fill(); }
+  if (stroke) {
+    ctx.setLineDash(dash || []);
+    ctx.strokeStyle = stroke; ctx.lineWidth = width; ctx.stroke();
+    ctx.setLineDash([]);
+  }
+}
+
+function drawArrow(x, y, yawDeg, len, colour, width = 2) {
+  const [sx, sy] = toScreen(x, y);
+  const ex = sx + len * Math.cos(rad(yawDeg)), ey = sy - len * Math.sin(rad(yawDeg));
+  ctx.strokeStyle = colour; ctx.fillStyle = colour; ctx.lineWidth = width;
+  ctx.beginPath(); ctx.moveTo(sx, sy); ctx.lineTo(ex, ey); ctx.stroke();
+  const a = Math.atan2(ey - sy, ex - sx), hl = Math.min(9, len * 0.45);
+  ctx.beginPath();
+  ctx.moveTo(ex, ey);
+  ctx.lineTo(ex - hl * Math.cos(a - 0.45), ey - hl * Math.sin(a - 0.45));
+  ctx.lineTo(ex - hl * Math.cos(a + 0.45), ey - hl * Math.sin(a + 0.45));
+  ctx.closePath(); ctx.fill();
+}
+
+function draw() {
+  const dpr = window.devicePixelRatio || 1;
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  const [w, h] = cssSize();
+  ctx.clearRect(0, 0, w, h);
+  if (!S.world) return;
+  const m = S.world.map;
+
+  // Map image, one pixel per cell (no smoothing: cells stay sharp when zoomed in).
+  if (S.mapImg && S.mapImg.complete) {
+    const [sx, sy] = toScreen(m.bounds_m[0], m.bounds_m[3]);
+    ctx.imageSmoothingEnabled = false;
+    ctx.drawImage(S.mapImg, sx, sy, (m.bounds_m[2] - m.bounds_m[0]) * S.view.scale,
+      (m.bounds_m[3] - m.bounds_m[1]) * S.view.scale);
+  }
+  for (const poly of S.world.obstacles) {
+    pathPolygon(poly, true);
+    ctx.fillStyle = "rgba(240,160,32,0.55)"; ctx.fill();
+    ctx.strokeStyle = "#f0a020"; ctx.lineWidth = 1.5; ctx.stroke();
+  }
+  drawGrid(w, h);
+  const f = S.frame;
+  if (!f) return;
+
+  // Parking boundaries of active park groups.
+  for (const g of f.groups || []) {
+    pathPolygon(g.boundary, true);
+    ctx.setLineDash([8, 5]); ctx.strokeStyle = "#29d3e0"; ctx.lineWidth = 2; ctx.stroke(); ctx.setLineDash([]);
+    ctx.fillStyle = "rgba(41,211,224,0.07)"; ctx.fill();
+  }
+
+  // Planned paths (green, as in the paper's Fig. 3) and goals of skids still on their way.
+  const states = f.robots.map((r) => stateName(r[3]));
+  (f.paths || []).forEach((p, i) => {
+    if (!p || !["moving", "stuck", "stopped", "estopped"].includes(states[i])) return;
+    const pts = [];
+    for (let k = 0; k + 1 < p.length; k += 2) pts.push([p[k], p[k + 1]]);
+    pathPolygon(pts, false);
+    ctx.strokeStyle = PATH_COLOUR; ctx.lineWidth = 1.5; ctx.globalAlpha = 0.8; ctx.stroke(); ctx.globalAlpha = 1;
+  });
+  (f.goals || []).forEach((g, i) => {
+    if (!g || states[i] === "parked") return;
+    drawFootprint(i, g[0], g[1], g[2], null, STATE_COLOURS[states[i]] || "#ccc", 1.2, [4, 3]);
+  });
+
+  // Skids: footprint coloured by state, heading arrow, id.
+  f.robots.forEach((r, i) => {
+    const [x, y, hd] = r;
+    const selected = S.selection.has(S.world.robots[i].id);
+    drawFootprint(i, x, y, hd, STATE_COLOURS[states[i]] || "#888", selected ? "#ffe14d" : "#0b0d10", selected ? 3 : 1);
+    const [cx, cy] = centre(i, x, y, hd);
+    const len = Math.max(8, S.world.robots[i].length_m * 0.45 * S.view.scale);
+    drawArrow(cx, cy, hd, len, "rgba(0,0,0,0.75)", 2);
+    const [sx, sy] = toScreen(cx, cy);
+    ctx.font = "bold 12px system-ui, sans-serif";
+    ctx.textAlign = "center"; ctx.textBaseline = "middle";
+    ctx.lineWidth = 3; ctx.strokeStyle = "rgba(0,0,0,0.8)";
+    const label = S.world.robots[i].id;
+    const off = S.world.robots[i].width_m * 0.5 * S.view.scale + 9;
+    ctx.strokeText(label, sx, sy - off); ctx.fillStyle = "#fff"; ctx.fillText(label, sx, sy - off);
+  });
+
+  // People (moving obstacles).
+  (f.people || []).forEach(([x, y], k) => {
+    const rad_m = S.world.people[k] ? S.world.people[k].radius_m : 0.3;
+    const [sx, sy] = toScreen(x, y);
+    ctx.beginPath(); ctx.arc(sx, sy, rad_m * S.view.scale, 0, 2 * Math.PI);
+    ctx.fillStyle = "rgba(255,90,60,0.6)"; ctx.fill(); ctx.strokeStyle = "#ff5a3c"; ctx.lineWidth = 2; ctx.stroke();
+  });
+
+  drawOperatorLayer();
+}
+
+function drawGrid(w, h) {
+  // A 1 m / 5 m grid when zoomed in enough to be useful.
+  if (S.view.scale < 12) return;
+  const [x0, y1] = toWorld(0, 0), [x1, y0] = toWorld(w, h);
+  ctx.lineWidth = 1;
+  for (let x = Math.floor(x0); x <= x1; x++) {
+    const [sx] = toScreen(x, 0);
+    ctx.strokeStyle = x % 5 === 0 ? "rgba(60,120,200,0.28)" : "rgba(60,120,200,0.12)";
+    ctx.beginPath(); ctx.moveTo(sx, 0); ctx.lineTo(sx, h); ctx.stroke();
+  }
+  for (let y = Math.floor(y0); y <= y1; y++) {
+    const [, sy] = toScreen(0, y);
+    ctx.strokeStyle = y % 5 === 0 ? "rgba(60,120,200,0.28)" : "rgba(60,120,200,0.12)";
+    ctx.beginPath(); ctx.moveTo(0, sy); ctx.lineTo(w, sy); ctx.stroke();
+  }
+}
+
+function drawOperatorLayer() {
+  const d = S.drawing;
+  // The boundary being drawn or awaiting confirmation, and the previewed goals.
+  if (S.boundary) {
+    pathPolygon(S.boundary, true);
+    ctx.fillStyle = "rgba(255,225,77,0.10)"; ctx.fill();
+    ctx.strokeStyle = "#ffe14d"; ctx.lineWidth = 2; ctx.stroke();
+  }
+  if (S.preview && S.preview.goals) {
+    const order = S.preview.robots.map((id) => ids().indexOf(id));
+    S.preview.goals.forEach((g, k) => {
+      const i = order[k] >= 0 ? order[k] : 0;
+      drawFootprint(i, g[0], g[1], g[2], "rgba(255,120,255,0.18)", "#ff78ff", 1.5, [5, 3]);
+      const [cx, cy] = centre(i, g[0], g[1], g[2]);
+      drawArrow(cx, cy, g[2], Math.max(6, 0.4 * S.view.scale), "#ff78ff", 1.5);
+    });
+  }
+  if (!d) return;
+  if (d.kind === "polygon" && d.pts.length) {
+    const pts = S.mouse ? [...d.pts, S.mouse] : d.pts;
+    pathPolygon(pts, false);
+    ctx.strokeStyle = "#ffe14d"; ctx.lineWidth = 2; ctx.setLineDash([6, 4]); ctx.stroke(); ctx.setLineDash([]);
+    d.pts.forEach(([x, y]) => {
+      const [sx, sy] = toScreen(x, y);
+      ctx.fillStyle = "#ffe14d"; ctx.fillRect(sx - 3, sy - 3, 6, 6);
+    });
+  } else if ((d.kind === "rect" || d.kind === "box") && d.end) {
+    const [ax, ay] = toScreen(...d.start), [bx, by] = toScreen(...d.end);
+    ctx.setLineDash([6, 4]);
+    ctx.strokeStyle = d.kind === "box" ? "#ffffff" : "#ffe14d"; ctx.lineWidth = 1.5;
+    ctx.strokeRect(Math.min(ax, bx), Math.min(ay, by), Math.abs(bx - ax), Math.abs(by - ay));
+    ctx.setLineDash([]);
+  } else if (d.kind === "goal") {
+    const i = d.robot;
+    drawFootprint(i, d.start[0], d.start[1], d.heading, "rgba(255,225,77,0.2)", "#ffe14d", 2, [5, 3]);
+    drawArrow(d.start[0], d.start[1], d.heading, Math.max(14, 0.8 * S.view.scale), "#ffe14d", 2);
+  }
+}
+
+function renderLoop() {
+  if (S.dirty) { S.dirty = false; draw(); }
+  pollGamepad();
+  requestAnimationFrame(renderLoop);
+}
+
+// ------------------------------------------------------------------ panels
+
+function updatePanels() {
+  const f = S.frame;
+  if (!f || !S.world) return;
+  $("sim-time").textContent = f.t_s.toFixed(1);
+  const sim = f.sim || {};
+  $("sim-pause").textContent = sim.paused ? "Run" : "Pause";
+  $("sim-speed").textContent = (sim.speed >= 1 ? sim.speed.toFixed(sim.speed % 1 ? 1 : 0) : sim.speed.toFixed(2)) + "x";
+  $("sim-speed").title = "achieved " + (sim.rate ?? 0) + " sim s per s; tick " + (sim.tick_ms ?? "-") + " ms";
+  $("estop").classList.toggle("latched", !!f.estop);
+  $("estop-banner").classList.toggle("hidden", !f.estop);
+  $("error-banner").classList.toggle("hidden", !sim.error);
+  $("error-banner").textContent = sim.error || "";
+
+  // Per-skid table: rebuilt in place (100 rows at 20 Hz is cheap).
+  const tbody = $("status-table").tBodies[0];
+  const rows = f.robots;
+  while (tbody.rows.length < rows.length) {
+    const tr = tbody.insertRow();
+    for (let k = 0; k < 4; k++) tr.insertCell();
+    tr.addEventListener("click", (ev) => selectRobot(tr.dataset.robot, ev.shiftKey));
+  }
+  while (tbody.rows.length > rows.length) tbody.deleteRow(-1);
+  rows.forEach((r, i) => {
+    const id = S.world.robots[i].id, st = stateName(r[3]);
+    const tr = tbody.rows[i];
+    tr.dataset.robot = id; tr.dataset.state = st;
+    tr.classList.toggle("sel", S.selection.has(id));
+    tr.cells[0].textContent = id;
+    tr.cells[1].innerHTML = `<span class="chip" style="background:${STATE_COLOURS[st] || "#888"}"></span>${st}`;
+    tr.cells[2].textContent = r[4].toFixed(2);
+    const g = f.goals && f.goals[i];
+    tr.cells[3].textContent = g ? `${g[0].toFixed(1)}, ${g[1].toFixed(1)}, ${g[2].toFixed(0)}°` : "-";
+  });
+
+  if (f.metrics) {
+    const m = f.metrics;
+    const fmt = (v, d = 2) => (v === null || v === undefined ? "-" : typeof v === "number" ? v.toFixed(d) : String(v));
+    $("metrics").innerHTML = [
+      ["parked", `${m.parked} / ${m.commanded}`],
+      ["success", String(m.success)],
+      ["time to park", fmt(m.time_to_park_s, 1) + " s (bound " + fmt(m.lower_bound_s, 1) + " s)"],
+      ["collisions", m.collisions],
+      ["min clearance", fmt(m.min_clearance_m, 3) + " m"],
+      ["deadlocks", m.deadlocks],
+      ["path length", fmt(m.path_length_m, 1) + " m"],
+    ].map(([k, v]) => `<div><span>${k}</span><span>${v}</span></div>`).join("");
+  }
+  if (f.log && f.log !== updatePanels.lastLog) {
+    updatePanels.lastLog = f.log;
+    $("log").innerHTML = "";
+    for (const o of [...f.log].reverse()) {
+      const li = document.createElement("li");
+      li.className = o.accepted ? "ok" : "refused";
+      li.textContent = `${o.t_s.toFixed(1)} s  ${o.command}${o.robot ? " " + o.robot : ""}: ` +
+        (o.accepted ? "accepted" : "refused: " + o.reason);
+      $("log").appendChild(li);
+    }
+  }
+}
+
+function updateSelectionPanel() {
+  const sel = [...S.selection];
+  $("sel-count").textContent = sel.length ? `(${sel.length})` : "(none)";
+  $("sel-list").textContent = sel.join(" ");
+  const can = S.control;
+  $("btn-stop").disabled = !can || !sel.length;
+  $("btn-resume").disabled = !can || !sel.length;
+  $("btn-teleop").disabled = !can || sel.length !== 1 || S.teleop.robot === sel[0];
+  $("btn-release").disabled = !can || !S.teleop.robot;
+  updateParkPanel();
+  S.dirty = true;
+}
+
+function updateParkPanel() {
+  const st = $("park-status");
+  st.classList.remove("bad");
+  const ready = S.boundary && S.selection.size && S.preview && S.preview.goals;
+  $("park-confirm").disabled = !S.control || !ready;
+  if (!S.selection.size) st.textContent = "Select skids, then draw a boundary.";
+  else if (!S.boundary) st.textContent = `${S.selection.size} skid(s) selected: draw the parking boundary.`;
+  else if (!S.preview) st.textContent = "Computing the layout...";
+  else if (S.preview.error) { st.textContent = S.preview.error; st.classList.add("bad"); }
+  else st.textContent = `Preview: ${S.preview.goals.length} goals (${S.preview.method}, heading ` +
+    `${S.preview.report.heading_deg ?? "?"}°, spacing ${(S.preview.report.min_spacing_m ?? 0).toFixed(2)} m). Confirm to park.`;
+}
+
+function setTool(tool) {
+  S.tool = tool;
+  S.drawing = null;
+  document.querySelectorAll(".tool").forEach((b) => b.classList.toggle("active", b.dataset.tool === tool));
+  const hints = {
+    select: "",
+    polygon: "Boundary: click the vertices, double-click (or click the first vertex) to close. Esc cancels.",
+    rect: "Rectangle: drag the parking boundary. Esc cancels.",
+    goal: "Goal: click the goal of the selected skid, drag to set its heading.",
+  };
+  $("hint").textContent = hints[tool] || "";
+  S.dirty = true;
+}
+
+function selectRobot(id, add) {
+  if (add) { if (S.selection.has(id)) S.selection.delete(id); else S.selection.add(id); }
+  else S.selection = new Set([id]);
+  selectionChanged();
+}
+
+function selectionChanged() {
+  // Keep the world's order so a park command lists skids the same way every time.
+  S.selection = new Set(ids().filter((id) => S.selection.has(id)));
+  updateSelectionPanel();
+  requestPreview();
+}
+
+// ------------------------------------------------------------------ park
+
+function parkBody() {
+  const body = {
+    robots: [...S.selection],
+    boundary: S.boundary.map(([x, y]) => [+x.toFixed(3), +y.toFixed(3)]),
+    method: $("park-method").value,
+    margin_m: parseFloat($("park-margin").value) || 0,
+    assignment: $("park-assign").value,
+  };
+  body.heading_deg = $("park-auto").checked ? "auto" : parseFloat($("park-heading").value) || 0;
+  return body;
+}
+
+function requestPreview() {
+  S.preview = null;
+  updateParkPanel();
+  S.dirty = true;
+  if (!S.boundary || !S.selection.size || !S.control) return;
+  clearTimeout(requestPreview.timer);
+  requestPreview.timer = setTimeout(async () => {
+    const seq = ++S.previewSeq;
+    const r = await api("/api/park/preview", parkBody());
+    if (seq !== S.previewSeq) return;   // a newer request is on its way
+    S.preview = r.ok ? r.data : { error: why(r) };
+    updateParkPanel();
+    S.dirty = true;
+  }, 120);
+}
+
+async function confirmPark() {
+  if (!S.boundary || !S.selection.size) return;
+  const r = await command("/api/park", parkBody(), "park command accepted");
+  if (r.ok) { S.boundary = null; S.preview = null; setTool("select"); updateParkPanel(); }
+}
+
+function clearBoundary() {
+  S.boundary = null; S.preview = null; S.drawing = null;
+  updateParkPanel(); S.dirty = true;
+}
+
+function closePolygon(pts) {
+  // Drop repeated vertices (a double-click adds the same point twice).
+  const out = [];
+  for (const p of pts) {
+    const q = out[out.length - 1];
+    if (!q || Math.hypot(p[0] - q[0], p[1] - q[1]) * S.view.scale > 3) out.push(p);
+  }
+  if (out.length >= 3) {
+    const a = out[0], b = out[out.length - 1];
+    if (Math.hypot(a[0] - b[0], a[1] - b[1]) * S.view.scale <= 3) out.pop();
+  }
+  if (out.length < 3) { toast("a boundary needs at least 3 vertices"); return; }
+  S.boundary = out;
+  S.drawing = null;
+  setTool("select");
+  requestPreview();
+}
+
+// ------------------------------------------------------------------ mouse
+
+canvas.addEventListener("contextmenu", (ev) => ev.preventDefault());
+
+canvas.addEventListener("mousedown", (ev) => {
+  canvas.focus();
+  const [px, py] = eventXY(ev);
+  const wpt = toWorld(px, py);
+  if (ev.button === 1 || ev.button === 2) {
+    S.pan = { px, py, cx: S.view.cx, cy: S.view.cy };
+    ev.preventDefault();
+    return;
+  }
+  if (ev.button !== 0 || !S.world) return;
+  if (S.tool === "select") {
+    const hit = robotAt(...wpt);
+    if (hit !== null) { selectRobot(S.world.robots[hit].id, ev.shiftKey); return; }
+    S.drawing = { kind: "box", start: wpt, end: null, shift: ev.shiftKey };
+  } else if (S.tool === "rect") {
+    S.boundary = null; S.preview = null;
+    S.drawing = { kind: "rect", start: wpt, end: null };
+  } else if (S.tool === "polygon") {
+    if (!S.drawing || S.drawing.kind !== "polygon") { S.boundary = null; S.preview = null; S.drawing = { kind: "polygon", pts: [] }; }
+    const pts = S.drawing.pts;
+    if (pts.length >= 3) {
+      const [fx, fy] = toScreen(...pts[0]);
+      if (Math.hypot(fx - px, fy - py) < 8) { closePolygon(pts); return; }
+    }
+    pts.push(wpt);
+  } else if (S.tool === "goal") {
+    if (S.selection.size !== 1) { toast("select exactly one skid for a manual goal"); return; }
+    const i = ids().indexOf([...S.selection][0]);
+    const cur = S.frame ? S.frame.robots[i][2] : 0;
+    S.drawing = { kind: "goal", robot: i, start: wpt, startPx: [px, py], heading: cur };
+  }
+  S.dirty = true;
+});
+
+window.addEventListener("mousemove", (ev) => {
+  const [px, py] = eventXY(ev);
+  S.mouse = toWorld(px, py);
+  if (S.pan) {
+    S.view.cx = S.pan.cx - (px - S.pan.px) / S.view.scale;
+    S.view.cy = S.pan.cy + (py - S.pan.py) / S.view.scale;
+  }
+  const d = S.drawing;
+  if (d && (d.kind === "box" || d.kind === "rect")) d.end = S.mouse;
+  if (d && d.kind === "goal") {
+    const dx = px - d.startPx[0], dy = py - d.startPx[1];
+    if (Math.hypot(dx, dy) > 6) d.heading = deg(Math.atan2(-dy, dx));
+  }
+  $("hud").textContent = `x ${S.mouse[0].toFixed(2)}  y ${S.mouse[1].toFixed(2)} m   ${S.view.scale.toFixed(0)} px/m`;
+  S.dirty = true;
+});
+
+window.addEventListener("mouseup", (ev) => {
+  if (S.pan && (ev.button === 1 || ev.button === 2)) { S.pan = null; return; }
+  const d = S.drawing;
+  if (!d || ev.button !== 0) return;
+  if (d.kind === "box") {
+    S.drawing = null;
+    if (!d.end) { if (!d.shift) { S.selection.clear(); selectionChanged(); } return; }
+    const [x0, x1] = [Math.min(d.start[0], d.end[0]), Math.max(d.start[0], d.end[0])];
+    const [y0, y1] = [Math.min(d.start[1], d.end[1]), Math.max(d.start[1], d.end[1])];
+    if (!d.shift) S.selection.clear();
+    S.frame.robots.forEach((r, i) => {
+      const [cx, cy] = centre(i, r[0], r[1], r[2]);
+      if (cx >= x0 && cx <= x1 && cy >= y0 && cy <= y1) S.selection.add(S.world.robots[i].id);
+    });
+    selectionChanged();
+  } else if (d.kind === "rect") {
+    S.drawing = null;
+    if (!d.end) return;
+    const [x0, x1] = [Math.min(d.start[0], d.end[0]), Math.max(d.start[0], d.end[0])];
+    const [y0, y1] = [Math.min(d.start[1], d.end[1]), Math.max(d.start[1], d.end[1])];
+    if ((x1 - x0) * S.view.scale < 5 || (y1 - y0) * S.view.scale < 5) return;
+    S.boundary = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
+    setTool("select");
+    requestPreview();
+  } else if (d.kind === "goal") {
+    S.drawing = null;
+    const id = S.world.robots[d.robot].id;
+    command("/api/goto", { robot: id, pose: [+d.start[0].toFixed(3), +d.start[1].toFixed(3), +d.heading.toFixed(1)] },
+      `goal sent to ${id}`);
+  }
+  S.dirty = true;
+});
+
+canvas.addEventListener("dblclick", (ev) => {
+  if (S.tool === "polygon" && S.drawing && S.drawing.kind === "polygon") closePolygon(S.drawing.pts);
+  ev.preventDefault();
+});
+
+canvas.addEventListener("wheel", (ev) => {
+  const [px, py] = eventXY(ev);
+  zoomAt(px, py, Math.exp(-ev.deltaY * 0.0015));
+  ev.preventDefault();
+}, { passive: false });
+
+// ------------------------------------------------------------------ keyboard
+
+function typing(ev) {
+  const t = ev.target;
+  return t && (t.tagName === "INPUT" || t.tagName === "SELECT" || t.tagName === "TEXTAREA");
+}
+
+const TELEOP_KEYS = ["ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight"];
+
+window.addEventListener("keydown", (ev) => {
+  if (ev.code === "Space" && !(typing(ev) && ev.target.type !== "checkbox")) {
+    ev.preventDefault();
+    estop();
+    return;
+  }
+  if (S.teleop.robot && TELEOP_KEYS.includes(ev.key) && !typing(ev)) {
+    S.teleop.keys.add(ev.key);
+    ev.preventDefault();
+    return;
+  }
+  if (typing(ev)) return;
+  const k = ev.key.toLowerCase();
+  if (ev.key === "Escape") { S.drawing = null; if (S.tool !== "select") setTool("select"); else clearBoundary(); }
+  else if (ev.key === "Enter" && S.drawing && S.drawing.kind === "polygon") closePolygon(S.drawing.pts);
+  else if (k === "s") setTool("select");
+  else if (k === "b") setTool("polygon");
+  else if (k === "r") setTool("rect");
+  else if (k === "g") setTool("goal");
+  else if (k === "f") fit();
+  else if (k === "p") togglePause();
+  else if (ev.key === "+" || ev.key === "=") setSpeed(2);
+  else if (ev.key === "-") setSpeed(0.5);
+  S.dirty = true;
+});
+
+window.addEventListener("keyup", (ev) => { S.teleop.keys.delete(ev.key); });
+window.addEventListener("blur", () => S.teleop.keys.clear());
+
+// ------------------------------------------------------------------ commands
+
+async function estop() {
+  // No token needed: any console may stop the swarm.
+  const r = await api("/api/estop", undefined);
+  if (!r.ok) toast("E-STOP FAILED: " + why(r));
+}
+
+async function togglePause() {
+  const paused = S.frame && S.frame.sim ? S.frame.sim.paused : false;
+  await command("/api/sim", { paused: !paused });
+}
+
+async function setSpeed(factor) {
+  const cur = S.frame && S.frame.sim ? S.frame.sim.speed : 1;
+  const speed = Math.min(SPEED_MAX, Math.max(SPEED_MIN, +(cur * factor).toPrecision(3)));
+  await command("/api/sim", { speed });
+}
+
+// ------------------------------------------------------------------ teleop
+
+function gamepad() {
+  const pads = navigator.getGamepads ? navigator.getGamepads() : [];
+  for (const p of pads) if (p && p.connected) return p;
+  return null;
+}
+
+function pollGamepad() {
+  const p = gamepad();
+  $("gamepad").textContent = p ? p.id.slice(0, 28) : "no gamepad";
+}
+
+function teleopCommand() {
+  const i = ids().indexOf(S.teleop.robot);
+  const spec = S.world.robots[i];
+  const scale = parseFloat($("teleop-scale").value);
+  let fwd = 0, turn = 0;
+  const keys = S.teleop.keys;
+  if (keys.has("ArrowUp")) fwd += 1;
+  if (keys.has("ArrowDown")) fwd -= 1;
+  if (keys.has("ArrowLeft")) turn += 1;
+  if (keys.has("ArrowRight")) turn -= 1;
+  const p = gamepad();
+  if (p && fwd === 0 && turn === 0) {
+    // Left stick: up drives forward (axis 1 is negative up), left turns counter-clockwise.
+    const dz = (v) => (Math.abs(v) < GAMEPAD_DEADZONE ? 0 : v);
+    fwd = -dz(p.axes[1] || 0);
+    turn = -dz(p.axes[0] || 0);
+  }
+  return [fwd * scale * spec.max_speed_mps, turn * scale * spec.max_yaw_rate_radps];
+}
+
+async function takeOver() {
+  if (S.selection.size !== 1) return;
+  const robot = [...S.selection][0];
+  const r = await command("/api/teleop", { robot, v_mps: 0, omega_radps: 0 });
+  if (!r.ok) return;
+  S.teleop.robot = robot;
+  $("teleop-robot").textContent = robot;
+  $("teleop-box").classList.remove("hidden");
+  clearInterval(S.teleop.timer);
+  // Keep sending while driving: the server stops the skid if the commands stop coming.
+  S.teleop.timer = setInterval(async () => {
+    if (!S.teleop.robot || document.hidden) return;
+    const [v, w] = teleopCommand();
+    S.teleop.last = [v, w];
+    $("teleop-cmd").textContent = `v ${v.toFixed(2)} m/s  ω ${deg(w).toFixed(0)}°/s`;
+    const res = await api("/api/teleop", { robot: S.teleop.robot, v_mps: v, omega_radps: w });
+    if (!res.ok && S.teleop.robot) { toast(why(res)); stopTeleop(); }
+  }, TELEOP_PERIOD_MS);
+  updateSelectionPanel();
+}
+
+function stopTeleop() {
+  clearInterval(S.teleop.timer);
+  S.teleop.robot = null;
+  S.teleop.keys.clear();
+  $("teleop-box").classList.add("hidden");
+  updateSelectionPanel();
+}
+
+async function release() {
+  const robot = S.teleop.robot;
+  if (!robot) return;
+  stopTeleop();
+  await command("/api/release", { robot }, `${robot} handed back to autonomy`);
+}
+
+// ------------------------------------------------------------------ buttons
+
+$("estop").addEventListener("click", estop);
+$("resume-all").addEventListener("click", () => command("/api/resume", { robots: "all" }));
+$("btn-stop").addEventListener("click", () => command("/api/stop", { robots: [...S.selection] }));
+$("btn-resume").addEventListener("click", () => command("/api/resume", { robots: [...S.selection] }));
+$("btn-teleop").addEventListener("click", takeOver);
+$("btn-release").addEventListener("click", release);
+$("park-confirm").addEventListener("click", confirmPark);
+$("park-cancel").addEventListener("click", clearBoundary);
+for (const id of ["park-method", "park-heading", "park-margin", "park-assign", "park-auto"]) {
+  $(id).addEventListener("change", requestPreview);
+}
+document.querySelectorAll(".tool").forEach((b) => b.addEventListener("click", () => setTool(b.dataset.tool)));
+$("sim-pause").addEventListener("click", togglePause);
+$("sim-faster").addEventListener("click", () => setSpeed(2));
+$("sim-slower").addEventListener("click", () => setSpeed(0.5));
+$("sim-reset").addEventListener("click", () => command("/api/sim/reset", {}, "scenario reset"));
+$("scenario-load").addEventListener("click", async () => {
+  const r = await command("/api/scenario", { name: $("scenario-select").value, scripted: $("scenario-scripted").checked },
+    "scenario loaded");
+  if (r.ok) { S.selection.clear(); clearBoundary(); stopTeleop(); }
+});
+$("zoom-in").addEventListener("click", () => { const [w, h] = cssSize(); zoomAt(w / 2, h / 2, 1.4); });
+$("zoom-out").addEventListener("click", () => { const [w, h] = cssSize(); zoomAt(w / 2, h / 2, 1 / 1.4); });
+$("zoom-fit").addEventListener("click", fit);
+$("token-apply").addEventListener("click", () => {
+  S.token = $("token-input").value.trim();
+  sessionStorage.setItem("swarmpark-token", S.token);
+  checkAuth();
+});
+
+// ------------------------------------------------------------------ server state
+
+async function checkAuth() {
+  const r = await api("/api/auth", undefined, "GET");
+  if (!r.ok) return;
+  S.tokenRequired = r.data.token_required;
+  S.control = r.data.control;
+  $("auth").classList.toggle("hidden", !S.tokenRequired);
+  $("auth-badge").textContent = S.control ? "control" : "read-only";
+  $("auth-badge").className = "badge " + (S.control ? "" : "warn");
+  document.querySelectorAll("button.ctl, select, input").forEach((el) => {
+    if (!el.closest("#auth")) el.disabled = !S.control;
+  });
+  updateSelectionPanel();
+}
+
+async function loadWorld(rev) {
+  const r = await api("/api/world", undefined, "GET");
+  if (!r.ok) return;
+  const first = !S.world || S.world.file !== r.data.file;
+  S.world = r.data;
+  const img = new Image();
+  img.onload = () => { S.dirty = true; };
+  img.src = "/api/map?rev=" + S.world.rev;
+  S.mapImg = img;
+  // A reset keeps the view and the selection; another scenario starts afresh.
+  if (first) { S.selection.clear(); clearBoundary(); fit(); }
+  S.selection = new Set(ids().filter((id) => S.selection.has(id)));
+  updateSelectionPanel();
+  loadScenarios();
+}
+
+async function loadScenarios() {
+  const r = await api("/api/scenarios", undefined, "GET");
+  if (!r.ok) return;
+  const sel = $("scenario-select");
+  const names = r.data.scenarios.includes(r.data.current) ? r.data.scenarios : [r.data.current, ...r.data.scenarios];
+  sel.innerHTML = names.map((n) => `<option value="${n}">${n}</option>`).join("");
+  sel.value = r.data.current;
+}
+
+let loadingRev = null;
+
+async function onFrame(msg) {
+  if (msg.type !== "state") return;
+  if (!S.world || S.world.rev !== msg.rev) {
+    if (loadingRev !== msg.rev) {
+      loadingRev = msg.rev;
+      await loadWorld(msg.rev);
+    }
+    if (!S.world || S.world.rev !== msg.rev) return;
+  }
+  // Slow parts are sent only when they change: keep the last ones.
+  const prev = msg.full || !S.frame || S.frame.rev !== msg.rev ? {} : S.frame;
+  const f = { ...msg };
+  for (const k of ["goals", "paths", "groups", "log", "metrics"]) if (!(k in msg) && k in prev) f[k] = prev[k];
+  S.frame = f;
+  S.frames.push({ t_s: f.t_s, estop: f.estop, robots: f.robots });
+  if (S.frames.length > 400) S.frames.splice(0, S.frames.length - 400);
+  updatePanels();
+  S.dirty = true;
+}
+
+function connect() {
+  const proto = location.protocol === "https:" ? "wss:" : "ws:";
+  const ws = new WebSocket(`${proto}//${location.host}/api/ws`);
+  ws.onopen = () => { $("conn").textContent = "live"; $("conn").className = "badge"; connect.delay = 500; };
+  ws.onmessage = (ev) => onFrame(JSON.parse(ev.data));
+  ws.onclose = () => {
+    $("conn").textContent = "disconnected"; $("conn").className = "badge bad";
+    connect.delay = Math.min(5000, (connect.delay || 500) * 1.5);
+    setTimeout(connect, connect.delay);
+  };
+}
+
+// The token may come in the page URL once (?token=...): keep it for this tab, hide it.
+(function takeTokenFromUrl() {
+  const u = new URL(location.href);
+  const t = u.searchParams.get("token");
+  if (t) {
+    S.token = t;
+    sessionStorage.setItem("swarmpark-token", t);
+    u.searchParams.delete("token");
+    history.replaceState(null, "", u.toString());
+  }
+})();
+
+// For end-to-end tests and debugging: the view transform and the latest state.
+window.swarmpark = { S, toScreen, toWorld, fit };
+
+window.addEventListener("resize", () => { resize(); });
+resize();
+setTool("select");
+checkAuth();
+connect();
+requestAnimationFrame(renderLoop);
