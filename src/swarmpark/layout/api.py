@@ -329,6 +329,25 @@ def layout(
     raise last_error
 
 
+def _empty(method: str, region: Region, notices: list[str]) -> LayoutResult:
+    """The layout of zero skids (for capacity 0)."""
+    report = {
+        "method": method,
+        "heading_deg": math.degrees(region.heading),
+        "count": 0,
+        "capacity": 0,
+        "margin_m": region.margin,
+        "min_spacing_m": None,
+        "min_boundary_clearance_m": None,
+        "egress_ok": True,
+        "egress_layers": 0,
+        "opening": None,
+        "notices": notices,
+        "iterations": 0,
+    }
+    return LayoutResult(np.zeros((0, 3)), method, region.heading, (), report)
+
+
 def capacity(
     boundary,
     footprint: Footprint,
@@ -360,21 +379,7 @@ def capacity(
     assert best is not None
     k, region, st = best
     if k == 0:
-        report = {
-            "method": method,
-            "heading_deg": math.degrees(region.heading),
-            "count": 0,
-            "capacity": 0,
-            "margin_m": region.margin,
-            "min_spacing_m": None,
-            "min_boundary_clearance_m": None,
-            "egress_ok": True,
-            "egress_layers": 0,
-            "opening": None,
-            "notices": ["not even one skid fits"],
-            "iterations": 0,
-        }
-        return LayoutResult(np.zeros((0, 3)), method, region.heading, (), report)
+        return _empty(method, region, ["not even one skid fits"])
     centres = st.centres[st.placed]
     skids = make_skids([footprint] * k)
     info: dict = {"scan_order": st.order, "iterations": 0, "notices": []}
@@ -385,7 +390,10 @@ def capacity(
     elif method == "convex":
         from swarmpark.layout import convex
 
-        centres, info, skids = convex.largest(region, footprint, k)
+        centres, info = convex.largest(region, footprint, k)
+        if len(centres) == 0:
+            return _empty(method, region, ["convex: not even one skid fits"])
+        skids = make_skids([footprint] * len(centres))
     result = _finish(boundary, region, skids, centres, method, info, opening)
     result.report["capacity"] = len(result.poses)
     return result

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from swarmpark.layout.region import Region, Skids
+from swarmpark.layout.region import Region, Skids, rect_gaps
 
 __all__ = ["VARIANTS", "spread", "boundary_points", "local_terms", "total_energy"]
 
@@ -150,10 +150,7 @@ def _resolve(region: Region, half: np.ndarray, old: np.ndarray, prop: np.ndarray
         if len(idx) == 0:
             return cur, moved
         # Gaps of the moved footprints to all others (axis-aligned rectangles).
-        d = np.abs(cur[idx, None, :] - cur[None, :, :]) - (half[idx, None, :] + half[None, :, :])
-        gaps = np.hypot(np.maximum(d[..., 0], 0.0), np.maximum(d[..., 1], 0.0))
-        gaps[np.arange(len(idx)), idx] = np.inf
-        revert = (gaps < limit).any(axis=1)
+        revert = (rect_gaps(cur, half, idx) < limit).any(axis=1)
         if not revert.any():
             return cur, moved
         moved[idx[revert]] = False

@@ -254,14 +254,21 @@ def _erode(free: BaseGeometry, margin: float) -> BaseGeometry:
     return inner
 
 
-def rect_gaps(centres: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """Pairwise Euclidean gaps ``(N, N)`` between axis-aligned rectangles (0 if they overlap).
+def rect_gaps(centres: np.ndarray, half: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+    """Signed gaps between axis-aligned rectangles: distance if apart, minus the smaller
+    overlap depth along an axis if they overlap.
 
-    The diagonal is ``inf``.
+    Returns ``(R, N)`` gaps of the rectangles ``rows`` (default all, ``(N, N)``) to all;
+    a rectangle's gap to itself is ``inf``.
     """
-    d = np.abs(centres[:, None, :] - centres[None, :, :]) - (half[:, None, :] + half[None, :, :])
-    gaps = np.hypot(np.maximum(d[..., 0], 0.0), np.maximum(d[..., 1], 0.0))
-    np.fill_diagonal(gaps, np.inf)
+    rows = np.arange(len(centres)) if rows is None else np.asarray(rows)
+    d = np.abs(centres[rows, None, :] - centres[None, :, :]) - (
+        half[rows, None, :] + half[None, :, :]
+    )
+    apart = np.hypot(np.maximum(d[..., 0], 0.0), np.maximum(d[..., 1], 0.0))
+    depth = np.maximum(d[..., 0], d[..., 1])
+    gaps = np.where(depth < 0.0, depth, apart)
+    gaps[np.arange(len(rows)), rows] = np.inf
     return gaps
 
 
