@@ -240,9 +240,7 @@ function draw() {
   const states = f.robots.map((r) => stateName(r[3]));
   (f.paths || []).forEach((p, i) => {
     if (!p || !["moving", "stuck", "stopped", "estopped"].includes(states[i])) return;
-    const pts = [];
-    for (let k = 0; k + 1 < p.length; k += 2) pts.push([p[k], p[k + 1]]);
-    pathPolygon(pts, false);
+    pathPolygon(remainingPath(p, f.robots[i]), false);
     ctx.strokeStyle = PATH_COLOUR; ctx.lineWidth = 1.5; ctx.globalAlpha = 0.8; ctx.stroke(); ctx.globalAlpha = 1;
   });
   (f.goals || []).forEach((g, i) => {
@@ -276,6 +274,24 @@ function draw() {
   });
 
   drawOperatorLayer();
+}
+
+function remainingPath(flat, robot) {
+  // The path as planned starts where the skid was; draw what is left of it: from the skid
+  // to the end of the nearest segment, then on.
+  const pts = [];
+  for (let k = 0; k + 1 < flat.length; k += 2) pts.push([flat[k], flat[k + 1]]);
+  if (pts.length < 2) return pts;
+  const [x, y] = robot;
+  let best = 0, bestD = Infinity;
+  for (let k = 0; k + 1 < pts.length; k++) {
+    const [ax, ay] = pts[k], [bx, by] = pts[k + 1];
+    const dx = bx - ax, dy = by - ay, L2 = dx * dx + dy * dy || 1e-12;
+    const u = Math.max(0, Math.min(1, ((x - ax) * dx + (y - ay) * dy) / L2));
+    const d = Math.hypot(ax + u * dx - x, ay + u * dy - y);
+    if (d < bestD) { bestD = d; best = k; }
+  }
+  return [[x, y], ...pts.slice(best + 1)];
 }
 
 function drawGrid(w, h) {
@@ -628,10 +644,10 @@ window.addEventListener("keydown", (ev) => {
     estop();
     return;
   }
-  if (S.teleop.robot && TELEOP_KEYS.includes(ev.key) && !typing(ev)) {
+  if (TELEOP_KEYS.includes(ev.key) && !typing(ev)) {
+    // Tracked even before a take-over completes, so a key already held counts.
     S.teleop.keys.add(ev.key);
-    ev.preventDefault();
-    return;
+    if (S.teleop.robot) { ev.preventDefault(); return; }
   }
   if (typing(ev)) return;
   const k = ev.key.toLowerCase();
