@@ -41,7 +41,7 @@ class NavParams:
 
     lookahead_m: float = 1.2
     #: Within this distance of the goal the field attracts the goal pose itself.
-    approach_m: float = 1.5
+    approach_m: float = 2.0
     #: The goal force falls linearly inside this distance (2015 paper, extension 3) ...
     slow_radius_m: float = 1.2
     #: ... but not below this (m/s), so the skid still creeps into its spot.
@@ -77,6 +77,17 @@ class NavParams:
     resume_yaw_rad: float = np.deg2rad(4.0)
     k_dock: float = 1.0
     k_dock_yaw: float = 1.5
+    #: Give way: after being held up this long by a skid of higher rank, back away from it for
+    #: at most this long, or until this far (centre to centre) from it.
+    yield_after_s: float = 1.0
+    #: A skid near its goal held still this long by the monitor backs out and tries again.
+    stall_s: float = 2.0
+    stall_speed_mps: float = 0.02
+    stall_yaw_rate_radps: float = 0.05
+    #: Elsewhere it backs up this far (Navigation2's back-up recovery).
+    backup_m: float = 0.5
+    yield_s: float = 3.0
+    yield_clear_m: float = 2.5
     #: Skids held back by the fill order wait this far outside their parking boundary.
     hold_gap_m: float = 1.0
     #: Sampling of obstacle outlines for the field.
@@ -92,6 +103,13 @@ class _RobotNav:
     failed: bool = False
     docked: bool = False
     runup: bool = False
+    runup_from: float = 0.0
+    backup_left: float = 0.0
+    stalled_s: float = 0.0
+    blockers: set = field(default_factory=set)
+    blocked_s: float = 0.0
+    yield_until: float = -np.inf
+    yield_from: int = -1
 
 
 @dataclass
@@ -150,11 +168,42 @@ class Navigator:
             if not (stale or view.goal_changed[i] or (due and nav.failed)):
                 continue
             cm = self._costmap(view, view.footprints[i])
-            path = plan_path(cm, view.poses[i, :2], goal[:2])
+            path = self._plan_with_staging(cm, view.poses[i], goal)
             nav.path, nav.path_goal, nav.planned_t = path, goal.copy(), view.t
             nav.failed = path is None
             if path is not None:
                 nav.reverse = self._choose_end(view, i, path)
+
+    def _plan_with_staging(self, cm: Costmap, pose: np.ndarray, goal: np.ndarray):
+        """A path that ends with a straight run along the goal's axis.
+
+        The path is planned to a staging point ``runup_m`` before the goal on its axis (behind
+        it, to drive in forwards, or in front of it, to back in: whichever plans shorter) and
+        the goal is appended, so the skid arrives aligned. Falls back to a direct path when
+        neither staging point can be reached or the skid is already close.
+        """
+        from ..plan import path_length
+
+        p = self.params
+        direct = plan_path(cm, pose[:2], goal[:2])
+        if direct is None or np.linalg.norm(goal[:2] - pose[:2]) < 2 * p.runup_m:
+            return direct
+        axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
+        best = None
+        for side in (-1.0, 1.0):  # -1: staging behind the goal (drive in forwards)
+            stage = goal[:2] + side * p.runup_m * axis
+            # The straight run from the staging point to the goal must be free.
+            run = goal[:2][None] + np.linspace(0, 1, 10)[:, None] * (stage - goal[:2])[None]
+            rc = cm.grid.world_to_cell(run)
+            if not cm.grid.in_bounds(rc).all() or cm.grid.occupied[rc[:, 0], rc[:, 1]].any():
+                continue
+            head = plan_path(cm, pose[:2], stage)
+            if head is None:
+                continue
+            cand = np.vstack([head, goal[:2][None]])
+            if best is None or path_length(cand) < path_length(best):
+                best = cand
+        return best if best is not None else direct
 
     def _choose_end(self, view: ControlView, i: int, path: np.ndarray) -> bool:
         """Drive the rear first (reverse) when the goal heading points back along the path's
@@ -284,8 +333,17 @@ class Navigator:
         raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
         # At the goal position, only turn to the goal heading.
         raw = self._dock(view, idx, raw, targets, final)
+        raw = self._give_way(view, idx, raw, dist_goal)
         cmd[idx] = self._monitor(view, idx, raw)
         self._hold_outside(view, idx, cmd)
+        for i in idx:  # how long the monitor or the field has kept a skid (nearly) still
+            nav = self._robots[i]
+            still = (
+                abs(cmd[i, 0]) < p.stall_speed_mps
+                and abs(cmd[i, 1]) < p.stall_yaw_rate_radps
+                and not nav.docked
+            )
+            nav.stalled_s = nav.stalled_s + view.dt if still else 0.0
         return cmd
 
     def _dock(self, view: ControlView, idx, raw, targets, final) -> np.ndarray:
@@ -322,15 +380,31 @@ class Navigator:
                 nav.docked, nav.runup = True, False
                 out[k] = 0.0
                 continue
-            near = final[k] and dist[k] < p.runup_m * 1.2 and abs(e_yaw[k]) < np.deg2rad(60)
+            near = final[k] and dist[k] < p.runup_m * 2.0 and abs(e_yaw[k]) < np.deg2rad(75)
             if not near:
                 nav.runup = False
+                if nav.stalled_s >= p.stall_s and nav.backup_left <= 0:
+                    nav.backup_left, nav.stalled_s = p.backup_m, 0.0
+                if nav.backup_left > 0:
+                    # Recovery (as Navigation2's back-up): reverse straight, away from whatever
+                    # holds the skid, then let the field try again.
+                    step = abs(view.vel[i, 0]) * view.dt
+                    nav.backup_left -= max(step, 0.0) if abs(view.vel[i, 0]) > 1e-3 else 0.0
+                    if nav.stalled_s >= p.stall_s:  # backing is blocked too
+                        nav.backup_left = 0.0
+                    out[k] = (-np.sign(raw[k, 0] + 1e-9) * 0.5 * view.max_speed[i], 0.0)
                 continue
             too_close = abs(e_lat[k]) > p.dock_lateral_m and abs(e_long[k]) < p.dock_radius_m
-            if too_close:
-                nav.runup = True
-            if nav.runup and (abs(e_lat[k]) < 0.5 * p.dock_lateral_m or abs(e_long[k]) > p.runup_m):
-                nav.runup = False
+            wedged = nav.stalled_s >= p.stall_s  # the monitor has held it still: back out
+            if (too_close or wedged) and not nav.runup:
+                nav.runup, nav.runup_from, nav.stalled_s = True, abs(e_long[k]), 0.0
+            backed = abs(e_long[k]) - nav.runup_from
+            if nav.runup and (
+                abs(e_lat[k]) < 0.5 * p.dock_lateral_m
+                or backed > p.runup_m
+                or (backed > 0.2 and nav.stalled_s >= p.stall_s)
+            ):
+                nav.runup, nav.stalled_s = False, 0.0
             # Travel direction: towards the goal along its axis, or away from it (run-up).
             to_goal = -np.sign(e_long[k]) if abs(e_long[k]) > 1e-6 else 1.0
             sgn = -to_goal if nav.runup else to_goal
@@ -349,6 +423,36 @@ class Navigator:
             v = sgn * speed * max(np.cos(yaw_err), 0.0) ** 2
             w = np.clip(p.k_dock_yaw * yaw_err, -view.max_yaw_rate[i], view.max_yaw_rate[i])
             out[k] = (v, w)
+        return out
+
+    def _give_way(self, view: ControlView, idx, raw, dist_goal) -> np.ndarray:
+        """Right of way at bottlenecks: a skid held up by a skid of higher rank (priority, then
+        nearer its goal, then lower index) for ``yield_after_s`` backs away from it for up to
+        ``yield_s``, so the other can pass. Docking skids never give way."""
+        p = self.params
+        out = raw.copy()
+        rank = {int(i): (-view.priority[i], dist_goal[k], int(i)) for k, i in enumerate(idx)}
+        for k, i in enumerate(idx):
+            nav = self._robots[i]
+            if nav.docked or dist_goal[k] < p.dock_radius_m * 2:
+                nav.yield_until = -np.inf
+                continue
+            if view.t >= nav.yield_until and nav.blocked_s >= p.yield_after_s:
+                better = [j for j in nav.blockers if j in rank and rank[j] < rank[int(i)]]
+                better += [j for j in nav.blockers if j not in rank]  # idle/parked skids
+                if better:
+                    nav.yield_from = min(better, key=lambda j: rank.get(j, (-np.inf,)))
+                    nav.yield_until = view.t + p.yield_s
+                    nav.blocked_s = 0.0
+            if view.t < nav.yield_until:
+                j = nav.yield_from
+                away = view.poses[i, :2] - view.poses[j, :2]
+                if np.linalg.norm(away) > p.yield_clear_m:
+                    nav.yield_until = -np.inf
+                    continue
+                th = view.poses[i, 2]
+                along = away[0] * np.cos(th) + away[1] * np.sin(th)
+                out[k] = (0.5 * view.max_speed[i] * np.sign(along + 1e-9), 0.0)
         return out
 
     def docked(self) -> np.ndarray:
@@ -474,6 +578,10 @@ class Navigator:
         fps = view.footprints
         grow = p.monitor_margin_m
         body = self._outlines(view)[2][idx]
+        plain = np.stack([fps[i].corners_body() for i in idx])
+        # A skid already inside its margin of something is judged by its plain footprint, or it
+        # could never move away again.
+        body = np.where(self._within_margin(view, idx, body)[:, None, None], plain, body)
         # Poses for every (robot, scale, time): constant (v, omega) arcs from the current pose.
         v = raw[:, 0][:, None, None] * scales[None, :, None]
         w = np.broadcast_to(raw[:, 1][:, None, None], v.shape)
@@ -513,9 +621,13 @@ class Navigator:
         qb = np.concatenate([np.asarray(c, dtype=int) for c in cand]).astype(int)
         keep = qb != idx[owner[qa]]
         qa, qb = qa[keep], qb[keep]
+        blockers: list[set[int]] = [set() for _ in range(n_act)]
         if len(qa):
             hit = convex_overlap(corners[qa], others[qb]) > TOUCH_TOLERANCE_M
             bad[qa[hit]] = True
+            full_speed = (qa // T) % S == 0
+            for a, b in zip(owner[qa[hit & full_speed]], qb[hit & full_speed], strict=True):
+                blockers[a].add(int(b))
         # People, moving on with their current velocity.
         if len(view.people_xy):
             tt = np.tile(np.repeat(times, 1), n_act * S)
@@ -524,13 +636,37 @@ class Navigator:
                 gap = rect_disc_gap(corners, centre, np.full(len(corners), view.people_radius[k]))
                 bad |= gap < 0
         bad = bad.reshape(n_act, S, T)
-        # A scale is safe if none of its samples collides; also stop turning if nothing is safe.
+        # The fastest safe scale; if even turning in place collides, stop turning as well.
         safe = ~bad.any(axis=2)
-        # Samples that already collide at scale 0 (e.g. a neighbour inside our margin) cannot be
-        # cured by slowing: judge those robots only on whether moving makes it worse.
-        stuck_now = bad[:, -1, :].any(axis=1)
         first_safe = np.where(safe.any(axis=1), np.argmax(safe, axis=1), S - 1)
         out = raw.copy()
         out[:, 0] *= scales[first_safe]
-        out[stuck_now, 0] = raw[stuck_now, 0] * 0.3
+        out[~safe[:, -1]] = 0.0
+        slowed = first_safe > 0
+        for k, i in enumerate(idx):
+            nav = self._robots[i]
+            nav.blockers = blockers[k] if slowed[k] else set()
+            nav.blocked_s = nav.blocked_s + view.dt if nav.blockers else 0.0
+        return out
+
+    def _within_margin(self, view: ControlView, idx: np.ndarray, grown: np.ndarray) -> np.ndarray:
+        """Skids whose grown footprint overlaps a static solid or another skid right now."""
+        corners = footprint_corners(view.poses[idx], grown)
+        out = np.zeros(len(idx), dtype=bool)
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        qi, si = self._static_tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        if len(qi):
+            hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
+            out[qi[hit]] = True
+        others = footprint_corners(
+            view.poses, np.stack([f.corners_body() for f in view.footprints])
+        )
+        ia, ib = np.meshgrid(np.arange(len(idx)), np.arange(len(view.poses)), indexing="ij")
+        ia, ib = ia.ravel(), ib.ravel()
+        near = np.linalg.norm(view.poses[idx[ia], :2] - view.poses[ib, :2], axis=1) < 3.0
+        near &= idx[ia] != ib
+        ia, ib = ia[near], ib[near]
+        if len(ia):
+            hit = convex_overlap(corners[ia], others[ib]) > TOUCH_TOLERANCE_M
+            out[ia[hit]] = True
         return out
