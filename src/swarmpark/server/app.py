@@ -17,6 +17,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 from .engine import Session
+from .frames import jsonable
 from .routers import commands, sim, state
 
 __all__ = [
@@ -91,7 +92,9 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     more = f" ({len(errors) - 1} more error(s))" if len(errors) > 1 else ""
     message = f"{field}: {msg} (got {shown!r}){more}"
     return JSONResponse(
-        status_code=422, content={"message": message, "detail": jsonable_encoder(errors)}
+        # (Non-finite inputs such as NaN become null: JSON has no NaN.)
+        status_code=422,
+        content={"message": message, "detail": jsonable(jsonable_encoder(errors))},
     )
 
 

@@ -14,6 +14,7 @@ import json
 import logging
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -82,6 +83,8 @@ class Session:
         Start ticking as soon as the pacing task runs (else start paused).
     scripted
         Run the scenario's own timed commands (else the operator gives every command).
+    clock
+        Wall clock (seconds) for the teleop dead-man; injectable for tests.
     """
 
     def __init__(
@@ -91,8 +94,10 @@ class Session:
         speed: float = 1.0,
         running: bool = True,
         scripted: bool = True,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.speed = float(speed)
+        self.clock = clock
         self.paused = not running
         self.rev = 0
         self.seq = 0
@@ -177,7 +182,7 @@ class Session:
     def teleop(self, robot: str, v: float, omega: float) -> Outcome:
         out = self.sup.set_teleop(robot, v, omega)
         if out.accepted:
-            self._teleop[robot] = (v, omega, time.monotonic(), self.sup.t)
+            self._teleop[robot] = (v, omega, self.clock(), self.sup.t)
         return self.command(out)
 
     def release(self, robot: str) -> Outcome:
@@ -188,7 +193,7 @@ class Session:
         """Re-send held teleop commands before the supervisor's own timeout (sim time) runs
         out, for as long as the operator keeps sending them (wall time): at a speed factor
         above one, sim time outruns the operator's key repeat."""
-        now = time.monotonic()
+        now = self.clock()
         for robot, (v, w, wall, sim_t) in list(self._teleop.items()):
             if now - wall > TELEOP_DEADMAN_S or not self.sup.teleop[self.sup.index[robot]]:
                 del self._teleop[robot]
@@ -206,9 +211,19 @@ class Session:
         self.tick_ms.append((time.perf_counter() - t0) * 1e3)
 
     def step(self, ticks: int) -> None:
-        for _ in range(ticks):
-            self.tick()
+        """Run ``ticks`` ticks now; a failing tick pauses the session with :attr:`error`."""
+        try:
+            for _ in range(ticks):
+                self.tick()
+        except Exception as exc:
+            self._fail(exc)
         self.encoder.metrics_now = True
+
+    def _fail(self, exc: Exception) -> None:
+        # Keep serving: the operator must see what happened, and may still reset or load.
+        log.exception("simulation tick failed")
+        self.error = f"simulation stopped: {type(exc).__name__}: {exc}"
+        self.paused = True
 
     def advance(self, wall_elapsed_s: float) -> int:
         """Run the ticks due after ``wall_elapsed_s`` of wall time; returns how many ran."""
@@ -305,10 +320,8 @@ class Session:
             try:
                 # After a stall (a laptop lid, a long plan) do not race to catch up.
                 ran = self.advance(min(elapsed, 5 * period))
-            except Exception as exc:  # keep serving: the operator must see what happened
-                log.exception("simulation tick failed")
-                self.error = f"simulation stopped: {type(exc).__name__}: {exc}"
-                self.paused = True
+            except Exception as exc:
+                self._fail(exc)
             if now - rate_t >= 1.0:
                 sim_dt = self.sup.t - rate_sim
                 self._rate = sim_dt / (now - rate_t) if sim_dt >= 0 else 0.0

@@ -54,7 +54,10 @@ async def set_sim(req: SimControlRequest, session: SessionDep):
     summary="Run a number of fixed ticks now (single-stepping a paused simulation)",
 )
 async def step(req: StepRequest, session: SessionDep):
+    """A tick that fails pauses the simulation: 500 with the error (also in GET /api/sim)."""
     session.step(req.ticks)
+    if session.error:
+        raise HTTPException(500, session.error)
     return session.status()
 
 
