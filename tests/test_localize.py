@@ -1,0 +1,345 @@
+"""Particle-filter localization: resampling, motion model, global localization, kidnapping."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import Polygon, box
+
+from swarmpark.geometry import wrap_angle
+from swarmpark.gridmap import OccupancyGrid, grid_from_walls
+from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
+from swarmpark.sense.localize import (
+    FilterConfig,
+    LikelihoodField,
+    OdometryDrift,
+    ParticleFilter,
+    kld_sample_count,
+    low_variance_resample,
+    relative_motion,
+)
+
+
+def asymmetric_room() -> OccupancyGrid:
+    """8 m x 5 m room, 10 cm walls, with a partition, a bench, a corner block and a wedge placed
+    so that no rotation or mirror of the room looks the same."""
+    w, h, t = 8.0, 5.0, 0.1
+    walls = [
+        box(0, 0, w, t),
+        box(0, h - t, w, h),
+        box(0, 0, t, h),
+        box(w - t, 0, w, h),
+        box(2.0, 0.0, 2.2, 2.0),
+        box(5.0, 3.2, 6.5, 3.5),
+        Polygon([(6.5, 0.1), (7.9, 0.1), (7.9, 1.2)]),
+        box(0.1, 4.3, 0.6, 4.9),
+    ]
+    return grid_from_walls((w, h), 0.05, walls)
+
+
+def drive(waypoints, v=0.5, w=1.0, dt=0.1) -> np.ndarray:
+    """True poses ``(T, 3)`` every ``dt`` for a skid that turns in place at each waypoint and
+    drives straight between them."""
+    out, yaw = [], None
+    pts = np.asarray(waypoints, dtype=float)
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
+        heading = float(np.arctan2(b[1] - a[1], b[0] - a[0]))
+        if yaw is not None:
+            turn = float(wrap_angle(heading - yaw))
+            for s in np.linspace(0, 1, int(abs(turn) / (w * dt)), endpoint=False):
+                out.append([a[0], a[1], yaw + s * turn])
+        yaw = heading
+        n = int(np.linalg.norm(b - a) / (v * dt))
+        for s in np.linspace(0, 1, n, endpoint=False):
+            out.append([*(a + s * (b - a)), yaw])
+    return np.array(out)
+
+
+ROUTE_A = [[1, 3.5], [4.5, 4.3], [7, 4.2], [7, 2.2], [4, 1.5]]
+ROUTE_B = [[3.2, 3], [1, 2.6], [1, 1], [1, 3.5], [4.5, 4.3]]
+
+
+def test_routes_keep_clear_of_walls():
+    g = asymmetric_room()
+    for route in (ROUTE_A, ROUTE_B):
+        p = drive(route)
+        assert g.distance_field()[tuple(g.world_to_cell(p[:, :2]).T)].min() > 0.5
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    w=st.lists(st.floats(0.0, 1.0), min_size=1, max_size=30).filter(lambda x: sum(x) > 1e-6),
+    n=st.integers(1, 200),
+    seed=st.integers(0, 2**31),
+)
+def test_low_variance_resampling_copies_each_particle_in_proportion(w, n, seed):
+    """Systematic resampling draws particle i either floor(n w_i) or ceil(n w_i) times."""
+    w = np.asarray(w)
+    idx = low_variance_resample(w, n, np.random.default_rng(seed))
+    counts = np.bincount(idx, minlength=len(w))
+    expected = n * w / w.sum()
+    assert counts.sum() == n
+    assert np.all(counts >= np.floor(expected - 1e-9)) and np.all(
+        counts <= np.ceil(expected + 1e-9)
+    )
+
+
+def test_kld_count_grows_with_the_number_of_bins():
+    k = np.arange(1, 200)
+    n = kld_sample_count(k, 0.05, 0.99)
+    assert n[0] == 1
+    assert np.all(np.diff(n) > 0)
+    # Fox (2003): about 50 bins need a few hundred particles at err 0.05, quantile 0.99.
+    assert 500 < kld_sample_count(np.array(50), 0.05, 0.99) < 900
+
+
+def test_noise_free_motion_moves_particles_exactly_by_the_odometry_increment():
+    g = asymmetric_room()
+    cfg = FilterConfig(
+        alpha1=0, alpha2=0, alpha3=0, alpha4=0, adaptive=False, min_particles=50, max_particles=50
+    )
+    pf = ParticleFilter(
+        LikelihoodField(g),
+        LidarSpec(),
+        config=cfg,
+        rng=np.random.default_rng(0),
+        initial_pose=np.array([2.0, 3.0, 0.3]),
+        initial_std=(0.0, 0.0, 0.0),
+    )
+    pf.predict(np.array([10.0, 10.0, np.pi / 2]), np.array([10.0, 11.0, np.pi]))
+    # In the odometry frame: 1 m along the heading, then a 90 deg left turn.
+    expected = [2.0 + np.cos(0.3), 3.0 + np.sin(0.3), 0.3 + np.pi / 2]
+    np.testing.assert_allclose(pf.particles, np.tile(expected, (50, 1)), atol=1e-12)
+
+
+def test_motion_noise_grows_with_distance_and_reversing_is_not_a_half_turn():
+    g = asymmetric_room()
+    cfg = FilterConfig(
+        adaptive=False, max_particles=4000, alpha1=0.05, alpha2=0.05, alpha3=0.05, alpha4=0.05
+    )
+    spreads = []
+    for dist in (0.5, 2.0):
+        pf = ParticleFilter(
+            LikelihoodField(g),
+            LidarSpec(),
+            config=cfg,
+            rng=np.random.default_rng(1),
+            initial_pose=np.zeros(3),
+            initial_std=(0.0, 0.0, 0.0),
+        )
+        pf.predict(np.zeros(3), np.array([dist, 0.0, 0.0]))
+        spreads.append(pf.particles[:, 0].std())
+        # Translation sd is sqrt(alpha3) * dist.
+        assert pf.particles[:, 0].std() == pytest.approx(np.sqrt(0.05) * dist, rel=0.1)
+    assert spreads[1] > 3 * spreads[0]
+    pf = ParticleFilter(
+        LikelihoodField(g),
+        LidarSpec(),
+        config=cfg,
+        rng=np.random.default_rng(1),
+        initial_pose=np.zeros(3),
+        initial_std=(0.0, 0.0, 0.0),
+    )
+    pf.predict(np.zeros(3), np.array([-1.0, 0.0, 0.0]))  # straight back 1 m
+    # Heading noise has variance alpha2 * trans^2 (0.05) for both rotations, as for driving
+    # forwards; taking the reversal (rot1 = pi) as a half turn would give 0.05 * (pi^2 + 1).
+    assert pf.particles[:, 0].mean() == pytest.approx(-np.exp(-0.05 / 2), abs=0.01)
+    assert wrap_angle(pf.particles[:, 2]).std() == pytest.approx(np.sqrt(0.1), rel=0.1)
+
+
+def test_relative_motion_turn_in_place():
+    rot1, trans, rot2 = relative_motion(np.array([1.0, 1.0, 0.0]), np.array([1.0, 1.0, 1.0]))
+    assert (float(rot1), float(trans), float(rot2)) == pytest.approx((0.0, 0.0, 1.0))
+
+
+def test_weights_stay_normalized_and_nonnegative():
+    g = asymmetric_room()
+    spec = LidarSpec(range_noise_std_m=0.01)
+    rng = np.random.default_rng(3)
+    pf = ParticleFilter(LikelihoodField(g), spec, rng=np.random.default_rng(4))
+    for pose in drive(ROUTE_A)[:20]:
+        pf.update(scan(spec, pose[None], g, rng=rng)[0])
+        w = pf.weights
+        assert w.sum() == pytest.approx(1.0, abs=1e-12)
+        assert np.all(w >= 0)
+        assert len(w) == len(pf.particles)
+
+
+def test_estimate_uses_circular_mean_and_the_heavier_cluster():
+    g = asymmetric_room()
+    pf = ParticleFilter(
+        LikelihoodField(g),
+        LidarSpec(),
+        config=FilterConfig(adaptive=False, min_particles=4, max_particles=4),
+        rng=np.random.default_rng(0),
+        initial_pose=np.zeros(3),
+    )
+    pf.particles = np.array(
+        [[1.0, 1.0, np.pi - 0.1], [1.0, 1.0, -np.pi + 0.1], [6.0, 3.0, 0.0], [6.0, 3.1, 0.0]]
+    )
+    pf.log_w = np.log(np.array([0.35, 0.35, 0.15, 0.15]))
+    est = pf.estimate()
+    assert est.pose[:2] == pytest.approx([1.0, 1.0])
+    assert abs(wrap_angle(est.pose[2] - np.pi)) < 1e-9
+    assert est.weight == pytest.approx(0.7)
+    est_all = pf.estimate(cluster=False)
+    assert est_all.pose[0] == pytest.approx(0.7 * 1.0 + 0.3 * 6.0)
+
+
+def _run(seed: int):
+    """Global localization over route A, then a kidnapping to route B's start.
+
+    Returns position and yaw errors and particle counts ``(T,)``, and where route B starts."""
+    g = asymmetric_room()
+    field = LikelihoodField(g, min_clearance_m=0.3)
+    spec = LidarSpec(range_noise_std_m=0.01)
+    a, b = drive(ROUTE_A), drive(ROUTE_B)
+    truth = np.concatenate([a, b])
+    gf = prepare_grid(g)
+    rng = np.random.default_rng(seed)
+    odo = OdometryDrift(truth[:1], rng=np.random.default_rng(seed + 1))
+    pf = ParticleFilter(field, spec, rng=np.random.default_rng(seed + 2))  # uniform start
+    prev = truth[0]
+    errors, yaw_errors, counts = [], [], []
+    for i, pose in enumerate(truth):
+        if i == len(a):
+            odo.kidnap(pose[None])  # carried away: the wheels do not notice
+        now = odo.step(pose[None])[0]
+        pf.predict(prev, now)
+        prev = now
+        pf.update(scan(spec, pose[None], gf, rng=rng)[0])
+        est = pf.estimate()
+        errors.append(np.hypot(*(est.pose[:2] - pose[:2])))
+        yaw_errors.append(abs(wrap_angle(est.pose[2] - pose[2])))
+        counts.append(len(pf.particles))
+    return np.array(errors), np.array(yaw_errors), np.array(counts), len(a)
+
+
+def _settled(err: np.ndarray, tol: float) -> int:
+    """First index from which the error stays below ``tol``."""
+    bad = np.flatnonzero(err >= tol)
+    return 0 if len(bad) == 0 else int(bad[-1]) + 1
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_global_localization_converges_and_a_kidnapped_skid_recovers(seed):
+    err, yaw_err, counts, k = _run(seed)
+    # From a uniform start the error is below 10 cm within 10 updates (1 s of driving at
+    # 10 Hz) and stays there; tracking is then centimetre-accurate.
+    start = _settled(err[:k], 0.1)
+    assert start <= 10
+    assert err[start:k].mean() < 0.03
+    assert yaw_err[start:k].max() < np.radians(3.0)
+    # Once tracking, KLD-sampling keeps only a few hundred particles.
+    assert np.median(counts[start:k]) <= 400
+    # Kidnapped at update k: back under 10 cm within 50 updates (5 s), and stays.
+    recovered = _settled(err[k:], 0.1)
+    assert err[k] > 1.0  # it really was moved far
+    assert recovered <= 50
+    assert err[k + recovered :].mean() < 0.03
+
+
+def test_without_injection_a_kidnapped_skid_stays_lost():
+    """The control case for the test above: augmented MCL is what brings the skid back."""
+    g = asymmetric_room()
+    spec = LidarSpec(range_noise_std_m=0.01)
+    cfg = FilterConfig(alpha_fast=0.0)
+    a, b = drive(ROUTE_A), drive(ROUTE_B)
+    pf = ParticleFilter(
+        LikelihoodField(g, min_clearance_m=0.3),
+        spec,
+        config=cfg,
+        rng=np.random.default_rng(2),
+        initial_pose=a[0],
+    )
+    rng = np.random.default_rng(0)
+    prev = a[0]
+    for pose in a[:60]:
+        pf.predict(prev, pose)
+        prev = pose
+        pf.update(scan(spec, pose[None], g, rng=rng)[0])
+    assert np.hypot(*(pf.estimate().pose[:2] - a[59, :2])) < 0.05
+    prev = b[0]
+    for pose in b[:80]:  # odometry continues from where it was
+        pf.predict(prev, pose)
+        prev = pose
+        pf.update(scan(spec, pose[None], g, rng=rng)[0])
+    assert np.hypot(*(pf.estimate().pose[:2] - b[79, :2])) > 0.5
+
+
+def test_odometry_drift_is_seeded_grows_and_misses_a_kidnapping():
+    truth = drive(ROUTE_A)
+    exact = OdometryDrift(
+        truth[:1],
+        alphas=(0, 0, 0, 0),
+        scale_error_std=0,
+        yaw_bias_std_rad_per_m=0,
+        rng=np.random.default_rng(0),
+    )
+    out = np.array([exact.step(p[None])[0] for p in truth])
+    np.testing.assert_allclose(out[:, :2], truth[:, :2], atol=1e-9)
+    runs = []
+    for _ in range(2):
+        odo = OdometryDrift(
+            truth[:1],
+            rng=np.random.default_rng(5),
+            scale_error_std=0.02,
+            yaw_bias_std_rad_per_m=0.02,
+        )
+        runs.append(np.array([odo.step(p[None])[0] for p in truth]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    drift = np.hypot(*(runs[0][:, :2] - truth[:, :2]).T)
+    assert drift[-1] > drift[len(drift) // 4] > 0
+    odo = OdometryDrift(
+        truth[:1],
+        alphas=(0, 0, 0, 0),
+        scale_error_std=0,
+        yaw_bias_std_rad_per_m=0,
+        rng=np.random.default_rng(0),
+    )
+    odo.kidnap(np.array([[5.0, 1.0, 0.0]]))
+    after = odo.step(np.array([[5.5, 1.0, 0.0]]))[0]
+    np.testing.assert_allclose(
+        after,
+        [
+            truth[0, 0] + 0.5 * np.cos(truth[0, 2]),
+            truth[0, 1] + 0.5 * np.sin(truth[0, 2]),
+            truth[0, 2],
+        ],
+        atol=1e-12,
+    )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"min_particles": 0}, "min_particles"),
+        ({"min_particles": 10, "max_particles": 5}, "min_particles"),
+        ({"alpha3": -1.0}, "alpha3"),
+        ({"max_beams": 0}, "max_beams"),
+        ({"kld_err": 0.0}, "kld_err"),
+        ({"alpha_slow": 1.5}, "alpha_slow"),
+        ({"likelihood_power": 0.0}, "likelihood_power"),
+        ({"min_neff_ratio": 1.0}, "min_neff_ratio"),
+    ],
+)
+def test_bad_filter_config_names_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=f"filter.{field}"):
+        FilterConfig(**kwargs)
+
+
+def test_bad_field_and_pose_are_refused():
+    g = asymmetric_room()
+    with pytest.raises(ValueError, match="likelihood.sigma_hit_m"):
+        LikelihoodField(g, sigma_hit_m=0.0)
+    with pytest.raises(ValueError, match="no free cell with clearance"):
+        LikelihoodField(g, min_clearance_m=10.0)
+    with pytest.raises(ValueError, match="filter.initial_pose must be finite"):
+        ParticleFilter(
+            LikelihoodField(g),
+            LidarSpec(),
+            rng=np.random.default_rng(0),
+            initial_pose=np.array([np.nan, 0.0, 0.0]),
+        )
