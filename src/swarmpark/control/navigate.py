@@ -206,14 +206,14 @@ class Navigator:
         return best if best is not None else direct
 
     def _choose_end(self, view: ControlView, i: int, path: np.ndarray) -> bool:
-        """Drive the rear first (reverse) when the goal heading points back along the path's
-        final approach: the skid then backs into its spot (2015 paper, extension 1)."""
-        goal = view.goals[i]
-        if len(path) >= 2 and np.linalg.norm(path[-1] - path[0]) > self.params.approach_m:
-            d = path[-1] - path[-2]
-            approach = np.arctan2(d[1], d[0])
-            return bool(abs(wrap_angle(goal[2] - approach)) > np.pi / 2)
-        return self._shorter_end(view, np.array([i]))[0]
+        """Which end leads along a path: the one facing the path's first stretch, forwards
+        unless the skid faces clearly away from it (it may turn in place). The parking end
+        is chosen again near the goal by the shorter arc (2015 paper, extension 1)."""
+        if len(path) < 2:
+            return self._shorter_end(view, np.array([i]))[0]
+        ahead = path[min(len(path) - 1, 1)] - path[0]
+        tangent = np.arctan2(ahead[1], ahead[0])
+        return bool(abs(wrap_angle(view.poses[i, 2] - tangent)) > np.deg2rad(120))
 
     def _shorter_end(self, view: ControlView, idx: np.ndarray) -> np.ndarray:
         """True where the rear action point has the shorter arc to the goal."""
@@ -380,7 +380,15 @@ class Navigator:
                 nav.docked, nav.runup = True, False
                 out[k] = 0.0
                 continue
-            near = final[k] and dist[k] < p.runup_m * 2.0 and abs(e_yaw[k]) < np.deg2rad(75)
+            close = final[k] and dist[k] < p.runup_m * 2.0
+            if close and abs(e_yaw[k]) >= np.deg2rad(75) and nav.backup_left <= 0:
+                # Far off the goal heading next to the goal: turn in place first (a
+                # differential-drive skid can); the axis law below needs a rough alignment.
+                nav.runup = False
+                w = np.clip(p.k_dock_yaw * e_yaw[k], -view.max_yaw_rate[i], view.max_yaw_rate[i])
+                out[k] = (0.0, w)
+                continue
+            near = close and abs(e_yaw[k]) < np.deg2rad(75)
             if not near:
                 nav.runup = False
                 if nav.stalled_s >= p.stall_s and nav.backup_left <= 0:
