@@ -1,0 +1,27 @@
+"""Scenario regression: every shipped scenario meets its ``expect`` block, with zero collisions
+and every commanded skid within 0.10 m and 5 deg of its goal."""
+
+from pathlib import Path
+
+import pytest
+
+from swarmpark.run import run_world
+from swarmpark.scenario import build_world, load_scenario
+
+ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+SCENARIOS = sorted(p.name for p in ROOT.glob("*.yaml"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_scenario_meets_expectations(name):
+    world = build_world(load_scenario(ROOT / name))
+    r = run_world(world).result
+    assert r["expect_met"], r["expect_failures"]
+    if world.scenario.expect.success:
+        assert r["collisions"] == []
+        for rid, s in r["robots"].items():
+            if s["commanded"]:
+                assert s["final_position_error_m"] <= 0.10, rid
+                assert s["final_heading_error_deg"] <= 5.0, rid
+        assert r["min_clearance_m"] > 0.0
