@@ -258,19 +258,24 @@ class GridMapper:
             clear_r = np.where(np.isposinf(r), self.spec.max_range_m, clear_r)
         ok = np.isfinite(clear_r)
         clear_r = np.maximum(clear_r, 0.0)
+        # Everything a scan touches lies within its range of the sensor (plus the hit depth):
+        # work on that window only, so the cost does not grow with the map.
+        reach = (self.spec.max_range_m + (cfg.hit_depth_cells + 1.0) * res) / res
+        cx, cy = (sensor[0] - self.origin[0]) / res, (sensor[1] - self.origin[1]) / res
+        c0, c1 = max(int(np.floor(cx - reach)), 0), min(int(np.ceil(cx + reach)) + 1, w)
+        r0, r1 = max(int(np.floor(cy - reach)), 0), min(int(np.ceil(cy + reach)) + 1, h)
+        if c1 <= c0 or r1 <= r0:
+            self.scans += 1
+            return
         # Clearing: the star polygon through the shortened end points, filled by Pillow in
-        # pixel-centre coordinates (column u, row v) on the map's bounding window.
-        free = np.zeros(self.shape, dtype=bool)
+        # pixel-centre coordinates (column u, row v) of the window.
+        free = np.zeros((r1 - r0, c1 - c0), dtype=bool)
         if ok.sum() >= 2:
-            u = (sensor[0] + clear_r[ok] * np.cos(ang[ok]) - self.origin[0]) / res - 0.5
-            v = (sensor[1] + clear_r[ok] * np.sin(ang[ok]) - self.origin[1]) / res - 0.5
-            c0, c1 = max(int(np.floor(u.min())), 0), min(int(np.ceil(u.max())) + 1, w)
-            r0, r1 = max(int(np.floor(v.min())), 0), min(int(np.ceil(v.max())) + 1, h)
-            if c1 > c0 and r1 > r0:
-                img = Image.new("1", (c1 - c0, r1 - r0), 0)
-                verts = np.column_stack([u - c0, v - r0]).ravel().tolist()
-                ImageDraw.Draw(img).polygon(verts, fill=1, outline=1)
-                free[r0:r1, c0:c1] = np.asarray(img, dtype=bool)
+            u = (sensor[0] + clear_r[ok] * np.cos(ang[ok]) - self.origin[0]) / res - 0.5 - c0
+            v = (sensor[1] + clear_r[ok] * np.sin(ang[ok]) - self.origin[1]) / res - 0.5 - r0
+            img = Image.new("1", (c1 - c0, r1 - r0), 0)
+            ImageDraw.Draw(img).polygon(np.column_stack([u, v]).ravel().tolist(), fill=1, outline=1)
+            free = np.array(img, dtype=bool)
         # Hits: a return lies on the obstacle's face, so mark the cell a little behind it; range
         # noise smaller than that depth then does not thicken walls toward the robot.
         hit = finite & (r < self.spec.max_range_m)
@@ -279,14 +284,15 @@ class GridMapper:
         hy = sensor[1] + (r[hit] + nudge) * np.sin(ang[hit])
         col = np.floor((hx - self.origin[0]) / res).astype(np.int64)
         row = np.floor((hy - self.origin[1]) / res).astype(np.int64)
-        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        inside = (row >= r0) & (row < r1) & (col >= c0) & (col < c1)
         row, col = row[inside], col[inside]
-        occ = np.zeros(self.shape, dtype=bool)
-        occ[row, col] = True
+        occ = np.zeros_like(free)
+        occ[row - r0, col - c0] = True
         free &= ~occ  # a cell both passed and hit in one scan counts as hit
-        self.log_odds += cfg.l_free * free + cfg.l_occ * occ
-        np.clip(self.log_odds, cfg.l_min, cfg.l_max, out=self.log_odds)
-        self.observed |= free | occ
+        win = self.log_odds[r0:r1, c0:c1]
+        win += cfg.l_free * free + cfg.l_occ * occ
+        np.clip(win, cfg.l_min, cfg.l_max, out=win)
+        self.observed[r0:r1, c0:c1] |= free | occ
         # Exact end points (not nudged) for the matcher's reference cloud.
         ex = sensor[0] + r[hit][inside] * np.cos(ang[hit][inside])
         ey = sensor[1] + r[hit][inside] * np.sin(ang[hit][inside])
