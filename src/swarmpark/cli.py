@@ -147,6 +147,20 @@ def _cell(v) -> str:
     return "-" if v is None else str(v)
 
 
+# ----------------------------------------------------------------------------- formation
+
+
+def cmd_formation(args) -> int:
+    """Reproduce Liu, Sun and Zhu (2010): formation errors of three methods, the obstacle run."""
+    if not args.paper:
+        return _fail("formation: only --paper is available (the paper's experiments)")
+    from .control.formation_paper import run_paper
+
+    out = run_paper(Path(args.out))
+    print(json.dumps(out, indent=2, default=str))
+    return EXIT_OK
+
+
 # ----------------------------------------------------------------------------- main
 
 
@@ -167,6 +181,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--list", action="store_true", help="list the benchmarks and exit")
     b.add_argument("--out", default="benchmarks/results.json", help="JSON output path")
     b.set_defaults(func=cmd_bench)
+
+    f = sub.add_parser("formation", help="formation velocity planning (Liu, Sun, Zhu 2010)")
+    f.add_argument("--paper", action="store_true", help="reproduce the paper's figures and table")
+    f.add_argument("--out", default="docs/img", metavar="DIR", help="where to write them")
+    f.set_defaults(func=cmd_formation)
 
     sub.add_parser(
         "layout",
