@@ -1,0 +1,360 @@
+"""End-to-end tests of the operator interface in headless chromium (Playwright).
+
+The server runs with uvicorn on a free localhost port in a background thread (test harness
+only: the core still ticks on the server's event loop). The browser is Debian's chromium at
+/usr/bin/chromium; nothing is downloaded. Screenshots go to test-artifacts/.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+DATA = Path(__file__).parent / "data"
+SMALL = DATA / "ui-small.yaml"
+ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
+TOKEN = "browser-token"
+ROBOTS = ["s1", "s2", "s3", "s4"]
+BOX = [(6.5, 2.0), (10.5, 2.0), (10.5, 6.0), (6.5, 6.0)]
+#: Simulated seconds per wall second: parking the four skids takes ~15 s simulated.
+SPEED = 8.0
+DT_S = 0.05
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+    "--disable-sync",
+]
+
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.skipif(
+        not CHROMIUM.exists(), reason="needs Debian's chromium at /usr/bin/chromium"
+    ),
+]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class LiveServer:
+    """uvicorn serving ``create_app(...)`` from a background thread."""
+
+    def __init__(self, **kwargs) -> None:
+        import uvicorn
+
+        from swarmpark.server import create_app
+
+        self.app = create_app(SMALL, scenarios_dir=DATA, speed=SPEED, **kwargs)
+        self.port = _free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning")
+        self.server = uvicorn.Server(config)
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+
+    def __enter__(self) -> LiveServer:
+        self.thread.start()
+        deadline = time.monotonic() + 20
+        while not self.server.started:
+            if time.monotonic() > deadline or not self.thread.is_alive():
+                raise RuntimeError("uvicorn did not start")
+            time.sleep(0.05)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.server.should_exit = True
+        self.thread.join(10)
+
+    def call(self, method: str, path: str, body=None, token: str | None = None) -> dict:
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(self.url + path, data=data, method=method)
+        req.add_header("Content-Type", "application/json")
+        if token:
+            req.add_header("Authorization", f"Bearer {token}")
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return json.loads(r.read())
+
+
+@pytest.fixture(scope="module")
+def server():
+    with LiveServer() as s:
+        yield s
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def page(browser, server):
+    server.call("POST", "/api/scenario", {"name": "ui-small.yaml"})  # a fresh start
+    server.call("POST", "/api/sim", {"paused": False, "speed": SPEED})
+    pg = browser.new_page(viewport={"width": 1400, "height": 850})
+    errors: list[str] = []
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    pg.goto(server.url + "/")
+    pg.wait_for_function(
+        "document.querySelectorAll('#status-table tbody tr[data-state]').length === 4"
+    )
+    yield pg
+    pg.close()
+    assert not errors, errors
+
+
+def shot(pg, name: str) -> Path:
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / name
+    pg.screenshot(path=str(path))
+    return path
+
+
+def screen(pg, x: float, y: float) -> tuple[float, float]:
+    """Page coordinates of a world point (the UI's own view transform)."""
+    box = pg.locator("#map").bounding_box()
+    sx, sy = pg.evaluate("([x, y]) => window.swarmpark.toScreen(x, y)", [x, y])
+    return box["x"] + sx, box["y"] + sy
+
+
+def px_m(pg) -> float:
+    return pg.evaluate("window.swarmpark.S.view.scale")
+
+
+def table_states(pg) -> dict[str, str]:
+    return pg.evaluate(
+        "Object.fromEntries([...document.querySelectorAll('#status-table tbody tr')]"
+        ".map(r => [r.dataset.robot, r.dataset.state]))"
+    )
+
+
+def drag(pg, a, b, steps=8) -> None:
+    pg.mouse.move(*a)
+    pg.mouse.down()
+    pg.mouse.move(*b, steps=steps)
+    pg.mouse.up()
+
+
+def box_select_all(pg) -> None:
+    drag(pg, screen(pg, 1.0, 1.2), screen(pg, 3.5, 7.2))
+    pg.wait_for_function("document.getElementById('sel-count').textContent === '(4)'")
+
+
+def set_speed(server, speed: float) -> None:
+    # Slower where the test must see a skid while it is on its way (the machine may be busy).
+    server.call("POST", "/api/sim", {"speed": speed})
+
+
+def moving_rows(pg) -> int:
+    return pg.evaluate(
+        "[...document.querySelectorAll('#status-table tbody tr')]"
+        ".filter(r => r.dataset.state === 'moving').length"
+    )
+
+
+def test_drag_box_draw_boundary_park_and_see_them_parked(page, server):
+    pg = page
+    set_speed(server, 4.0)
+    box_select_all(pg)
+    assert pg.inner_text("#sel-list").split() == ROBOTS
+
+    # The boundary as a polygon: click the vertices, double-click the last one to close.
+    pg.click("#tool-polygon")
+    for v in BOX[:-1]:
+        pg.mouse.click(*screen(pg, *v))
+    pg.mouse.dblclick(*screen(pg, *BOX[-1]))
+    drawn = pg.evaluate("window.swarmpark.S.boundary")
+    tol = 2.0 / px_m(pg)  # two pixels
+    assert len(drawn) == 4
+    for (x, y), (bx, by) in zip(drawn, BOX, strict=True):
+        assert abs(x - bx) < tol and abs(y - by) < tol
+
+    pg.wait_for_function(
+        "document.getElementById('park-status').textContent.startsWith('Preview: 4 goals')"
+    )
+    preview = pg.evaluate("window.swarmpark.S.preview")
+    assert preview["robots"] == ROBOTS and len(preview["goals"]) == 4
+    for gx, gy, _ in preview["goals"]:
+        assert 6.5 < gx < 10.5 and 2.0 < gy < 6.0
+    assert server.call("GET", "/api/state")["goals"] == [None] * 4  # a preview commits nothing
+    shot(pg, "ui-preview.png")
+
+    pg.click("#park-confirm")
+    pg.wait_for_function(
+        "window.swarmpark.S.frame.robots.filter(r => Math.abs(r[4]) > 0.2).length >= 3"
+    )
+    if moving_rows(pg) >= 3:  # on the way, with their paths (the picture in docs/ui.md)
+        shot(pg, "ui-parking.png")
+    pg.wait_for_function(
+        "[...document.querySelectorAll('#status-table tbody tr')].every(r => r.dataset.state === 'parked')",
+        timeout=60000,
+    )
+    shot(pg, "ui-parked.png")
+
+    st = server.call("GET", "/api/state")
+    group = st["groups"][0]
+    assert sorted(group["robots"]) == ROBOTS and group["method"] == "stacking"
+    for x, y, _, _, _ in st["robots"]:
+        assert 6.5 < x < 10.5 and 2.0 < y < 6.0
+    log = [o for o in st["log"] if o["command"] == "park"]
+    assert log and log[-1]["accepted"]
+
+
+def test_rectangle_boundary_with_another_method_and_heading(page, server):
+    pg = page
+    box_select_all(pg)
+    pg.select_option("#park-method", "convex")
+    pg.fill("#park-heading", "90")
+    pg.click("#tool-rect")
+    drag(pg, screen(pg, 6.5, 1.5), screen(pg, 11.0, 6.5))
+    pg.wait_for_function(
+        "document.getElementById('park-status').textContent.startsWith('Preview:')"
+        " || document.getElementById('park-status').classList.contains('bad')"
+    )
+    status = pg.inner_text("#park-status")
+    preview = pg.evaluate("window.swarmpark.S.preview")
+    if "goals" in preview:
+        assert "convex" in status and all(abs(g[2] - 90) < 1e-6 for g in preview["goals"])
+    else:  # a layout the method cannot make is refused with the reason, shown to the operator
+        assert status == preview["error"] and status.startswith("refused:")
+        assert pg.is_disabled("#park-confirm")
+
+
+def test_refused_preview_shows_the_reason_and_confirm_stays_off(page, server):
+    pg = page
+    box_select_all(pg)
+    pg.click("#tool-rect")
+    drag(pg, screen(pg, 7.0, 3.0), screen(pg, 8.0, 4.0))  # room for one skid, not four
+    pg.wait_for_function("document.getElementById('park-status').classList.contains('bad')")
+    assert "fit" in pg.inner_text("#park-status")
+    assert pg.is_disabled("#park-confirm")
+    assert server.call("GET", "/api/state")["goals"] == [None] * 4
+
+
+def test_estop_key_halts_every_skid_within_one_tick(page, server):
+    pg = page
+    set_speed(server, 2.0)
+    server.call("POST", "/api/park", {"robots": ROBOTS, "boundary": [list(v) for v in BOX]})
+    pg.wait_for_function("window.swarmpark.S.frame.robots.every(r => Math.abs(r[4]) > 0.05)")
+    pg.locator("#map").focus()
+    pg.keyboard.press("Space")
+    pg.wait_for_function("window.swarmpark.S.frame.estop === true")
+    pg.wait_for_timeout(1000)
+    frame = pg.evaluate("window.swarmpark.S.frame")
+    frames = pg.evaluate("window.swarmpark.S.frames")
+    t_stop = [o["t_s"] for o in frame["log"] if o["command"] == "estop" and o["accepted"]][-1]
+    after = [f for f in frames if f["t_s"] >= t_stop + DT_S - 1e-6]
+    assert len(after) >= 5
+    # From the first tick after the e-stop on, nothing moves: zero speed, identical poses.
+    for f in after:
+        assert all(r[4] == 0 for r in f["robots"]), f
+        assert [r[:3] for r in f["robots"]] == [r[:3] for r in after[0]["robots"]]
+    assert set(table_states(pg).values()) == {"estopped"}
+    assert pg.is_visible("#estop-banner")
+    shot(pg, "ui-estop.png")
+
+    pg.click("#resume-all")
+    pg.wait_for_function("window.swarmpark.S.frame.estop === false")
+    pg.wait_for_function("window.swarmpark.S.frame.robots.some(r => Math.abs(r[4]) > 0)")
+    assert "estopped" not in table_states(pg).values()
+
+
+def test_stop_and_resume_one_skid_and_a_manual_goal_with_heading(page, server):
+    pg = page
+    set_speed(server, 1.0)
+    pg.click("#status-table tbody tr[data-robot='s4']")
+    assert pg.inner_text("#sel-list") == "s4"
+    pg.click("#tool-goal")
+    start, end = screen(pg, 6.0, 6.5), screen(pg, 6.0, 7.5)  # dragged north: 90 degrees
+    drag(pg, start, end)
+    pg.wait_for_function("window.swarmpark.S.frame.goals && window.swarmpark.S.frame.goals[3]")
+    gx, gy, gh = server.call("GET", "/api/state")["goals"][3]
+    tol = 2.0 / px_m(pg)
+    assert abs(gx - 6.0) < tol and abs(gy - 6.5) < tol and abs(gh - 90.0) < 1.0
+    pg.wait_for_function("Math.abs(window.swarmpark.S.frame.robots[3][4]) > 0.05")
+    pg.click("#btn-stop")
+    pg.wait_for_function(
+        "document.querySelector(\"tr[data-robot='s4']\").dataset.state === 'stopped'"
+    )
+    pg.click("#btn-resume")
+    pg.wait_for_function(
+        "document.querySelector(\"tr[data-robot='s4']\").dataset.state === 'moving'"
+    )
+    # A new goal while it moves, by clicking on the map again (no drag: keeps its heading).
+    pg.click("#tool-goal")
+    pg.mouse.click(*screen(pg, 4.0, 7.0))
+    pg.wait_for_function(
+        "(g => g && Math.abs(g[0] - 4.0) < 0.1)(window.swarmpark.S.frame.goals[3])"
+    )
+
+
+def test_teleop_with_arrow_keys_and_release(page, server):
+    pg = page
+    x0, y0 = server.call("GET", "/api/state")["robots"][0][:2]
+    pg.mouse.click(*screen(pg, 2.0, 2.0))  # click on s1 in the map
+    assert pg.inner_text("#sel-list") == "s1"
+    pg.click("#btn-teleop")
+    pg.wait_for_selector("#teleop-box:not(.hidden)")
+    pg.keyboard.down("ArrowUp")
+    pg.wait_for_function("window.swarmpark.S.frame.robots[0][0] > %f" % (x0 + 0.5), timeout=20000)
+    pg.keyboard.up("ArrowUp")
+    assert table_states(pg)["s1"] == "teleop"
+    x, y = server.call("GET", "/api/state")["robots"][0][:2]
+    assert x > x0 + 0.5 and abs(y - y0) < 0.05  # straight ahead along +x
+    pg.click("#btn-release")
+    pg.wait_for_function("document.querySelector(\"tr[data-robot='s1']\").dataset.state === 'idle'")
+
+
+def test_sim_controls_pause_speed_reset(page, server):
+    pg = page
+    pg.click("#sim-pause")
+    pg.wait_for_function("window.swarmpark.S.frame.sim.paused === true")
+    t = pg.evaluate("window.swarmpark.S.frame.t_s")
+    pg.wait_for_timeout(500)
+    assert pg.evaluate("window.swarmpark.S.frame.t_s") == t
+    pg.click("#sim-faster")
+    pg.wait_for_function(f"window.swarmpark.S.frame.sim.speed === {SPEED * 2}")
+    pg.click("#sim-slower")
+    pg.wait_for_function(f"window.swarmpark.S.frame.sim.speed === {SPEED}")
+    pg.click("#sim-slower")
+    pg.wait_for_function(f"window.swarmpark.S.frame.sim.speed === {SPEED / 2}")
+    pg.click("#sim-pause")
+    pg.wait_for_function(f"window.swarmpark.S.frame.t_s > {t + 0.5}")
+    pg.click("#sim-reset")
+    pg.wait_for_function(f"window.swarmpark.S.frame.t_s < {t}")
+    assert pg.input_value("#scenario-select") == "ui-small.yaml"
+
+
+def test_read_only_viewer_and_token_unlock(browser):
+    with LiveServer(token=TOKEN) as srv:
+        pg = browser.new_page(viewport={"width": 1400, "height": 850})
+        pg.goto(srv.url + "/")
+        pg.wait_for_function("document.getElementById('auth-badge').textContent === 'read-only'")
+        for sel in ("#park-confirm", "#tool-polygon", "#sim-pause", "#resume-all"):
+            assert pg.is_disabled(sel), sel
+        assert pg.is_enabled("#estop")  # any console may stop the swarm
+        pg.click("#estop")
+        pg.wait_for_function("window.swarmpark.S.frame && window.swarmpark.S.frame.estop === true")
+        pg.fill("#token-input", TOKEN)
+        pg.click("#token-apply")
+        pg.wait_for_function("document.getElementById('auth-badge').textContent === 'control'")
+        assert pg.is_enabled("#resume-all")
+        pg.click("#resume-all")
+        pg.wait_for_function("window.swarmpark.S.frame.estop === false")
+        pg.close()
