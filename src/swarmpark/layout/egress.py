@@ -139,9 +139,10 @@ def egress_order(
             count[sl] += mask
         cfree = wall_ok & (count == 0)
         labels, _ = ndimage.label(cfree, structure=_EIGHT)
-        seeds = np.unique(labels[apron & cfree])
-        seeds = seeds[seeds > 0]
-        reach = ndimage.binary_dilation(np.isin(labels, seeds), structure=_EIGHT)
+        is_seed = np.zeros(labels.max() + 1, dtype=bool)
+        is_seed[labels[apron & cfree]] = True
+        is_seed[0] = False
+        reach = ndimage.binary_dilation(is_seed[labels], structure=_EIGHT)
         layer = []
         for g in remaining:
             sl, mask = windows[g]
