@@ -91,7 +91,7 @@ def test_command_naming_unknown_robot():
 def test_command_with_two_actions_is_refused():
     msg = error_of(with_(commands=[{"at_s": 1, "estop": True, "resume": "all"}]))
     assert msg.startswith(
-        "commands[0]: a command needs exactly one of park, goto, stop, estop, resume"
+        "commands[0]: a command needs exactly one of park, goto, formation, stop, estop, resume"
     )
 
 

@@ -25,3 +25,13 @@ def test_scenario_meets_expectations(name):
                 assert s["final_position_error_m"] <= 0.10, rid
                 assert s["final_heading_error_deg"] <= 5.0, rid
         assert r["min_clearance_m"] > 0.0
+
+
+@pytest.mark.slow
+def test_formation_transit_holds_the_block():
+    world = build_world(load_scenario(ROOT / "formation-transit.yaml"))
+    r = run_world(world).result
+    (fe,) = r["formation_error"]
+    assert fe["method"] == "formation"
+    assert fe["max_pair_error_m"] < 0.03  # a 2 x 2 block of 1.2 m skids, held within 3 cm
+    assert r["min_clearance_m"] > 0.3

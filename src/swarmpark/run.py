@@ -80,6 +80,10 @@ def run_world(
         "commands": [o.as_dict() for o in sup.outcomes],
         "assignment_switches": int(sum(g.switches for g in sup.groups)),
     }
+    if sup.formations:
+        result["formation_error"] = [
+            {"robots": [sup.ids[i] for i in f.idx], **f.metrics()} for f in sup.formations
+        ]
     result["expect"] = scn.expect.model_dump(exclude_none=True)
     result["expect_met"], result["expect_failures"] = check_expect(result, scn.expect)
     return RunOutput(result, np.asarray(times), np.stack(poses), np.stack(people), sup)

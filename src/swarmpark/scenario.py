@@ -41,6 +41,7 @@ __all__ = [
 ]
 
 LAYOUT_METHODS = ("stacking", "potential", "convex")
+COMMAND_KINDS = ("park", "goto", "formation", "stop", "estop", "resume")
 ASSIGNMENT_COSTS = ("sequential", "euclidean", "formation", "path")
 
 Point = Annotated[list[float], Field(min_length=2, max_length=2)]
@@ -131,30 +132,48 @@ class GotoCmd(_Model):
     priority: NonNegFloat | None = None
 
 
+class FormationCmd(_Model):
+    """Move a group along given paths holding a formation (Liu, Sun, Zhu 2010).
+
+    ``paths`` has one list of waypoints per robot, or only the leader's, in which case each
+    follower's path is the leader's carried at its offset (a robot's position is put in front
+    of its waypoints when the first waypoint is not it). ``offsets_m`` gives, for every follower, its desired
+    position in the leader's frame (x forward, y left), either one ``[dx, dy]`` or one per
+    keypoint in ``offset_at`` (fractions of the leader's path); by default the group holds the
+    shape it starts in. The leader is the first robot.
+    """
+
+    robots: Annotated[list[str], Field(min_length=2)]
+    paths: list[Annotated[list[Point], Field(min_length=2)]]
+    method: Literal["formation", "no_formation", "leader_follower"] = "formation"
+    offsets_m: list[list[float]] | list[list[list[float]]] | None = None
+    offset_at: list[float] | None = None
+    dt_s: PositiveFloat = 1.0
+    steps: Annotated[int, Field(ge=2, le=400)] | None = None
+    d_safe_m: PositiveFloat | None = None
+
+
 class CommandSpec(_Model):
     at_s: NonNegFloat = 0.0
     park: ParkCmd | None = None
     goto: GotoCmd | None = None
+    formation: FormationCmd | None = None
     stop: list[str] | Literal["all"] | None = None
     estop: Literal[True] | None = None
     resume: list[str] | Literal["all"] | None = None
 
     @model_validator(mode="after")
     def _exactly_one(self) -> CommandSpec:
-        given = [
-            k for k in ("park", "goto", "stop", "estop", "resume") if getattr(self, k) is not None
-        ]
+        given = [k for k in COMMAND_KINDS if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(
-                f"a command needs exactly one of park, goto, stop, estop, resume (got {given})"
+                f"a command needs exactly one of {', '.join(COMMAND_KINDS)} (got {given})"
             )
         return self
 
     @property
     def kind(self) -> str:
-        return next(
-            k for k in ("park", "goto", "stop", "estop", "resume") if getattr(self, k) is not None
-        )
+        return next(k for k in COMMAND_KINDS if getattr(self, k) is not None)
 
 
 class ExpectSpec(_Model):
@@ -444,6 +463,18 @@ def _check_commands(world: World) -> None:
         elif c.goto is not None:
             if c.goto.robot not in ids:
                 raise ScenarioError(f"{f}.goto.robot: unknown robot {c.goto.robot!r}")
+        elif c.formation is not None:
+            fc = c.formation
+            for name in fc.robots:
+                if name not in ids:
+                    raise ScenarioError(f"{f}.formation.robots: unknown robot {name!r}")
+            if len(set(fc.robots)) != len(fc.robots):
+                raise ScenarioError(f"{f}.formation.robots: robot listed twice in {fc.robots}")
+            if len(fc.paths) not in (1, len(fc.robots)):
+                raise ScenarioError(
+                    f"{f}.formation.paths: give the leader's path or one per robot "
+                    f"({len(fc.robots)} robots, got {len(fc.paths)} paths)"
+                )
         else:
             names = c.stop if c.stop is not None else c.resume
             if isinstance(names, list):

@@ -26,6 +26,9 @@ from .sim import Simulator
 __all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
 
 ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
+#: A formation group keeps tracking its plan this long after the plan ends, then the
+#: navigation stack docks each skid exactly.
+FORMATION_GRACE_S = 3.0
 #: Teleop commands older than this are dropped (the operator let go or the link died).
 TELEOP_TIMEOUT_S = 0.5
 
@@ -90,6 +93,7 @@ class Supervisor:
         self._teleop_t = np.full(n, -np.inf)
         self.goal_changed = np.zeros(n, dtype=bool)
         self.groups: list[ParkGroup] = []
+        self.formations: list = []
         self.outcomes: list[Outcome] = []
         self.metrics = MetricsRecorder(self.ids, self.sim.poses.copy())
         self._pending = sorted(
@@ -156,6 +160,8 @@ class Supervisor:
             return self.park(cmd.park)  # type: ignore[arg-type]
         if kind == "goto":
             return self.goto(cmd.goto)  # type: ignore[arg-type]
+        if kind == "formation":
+            return self.formation(cmd.formation)  # type: ignore[arg-type]
         if kind == "stop":
             return self.stop(cmd.stop)  # type: ignore[arg-type]
         if kind == "estop":
@@ -344,6 +350,46 @@ class Supervisor:
             )
         return ""
 
+    def formation(self, cmd) -> Outcome:
+        """Move a group along paths holding a formation (Liu, Sun, Zhu 2010); the group is
+        handed back to the navigation stack for the final docking when the plan ends."""
+        from .control.formation_run import FormationError, FormationRun
+
+        idx = self._robot_indices(cmd.robots, "formation.robots")
+        if isinstance(idx, str):
+            return self._refuse("formation", idx)
+        busy = [self.ids[i] for i in idx if self.teleop[i]]
+        if busy:
+            return self._refuse("formation", f"formation.robots: robot {busy[0]!r} is under teleop")
+        try:
+            run = FormationRun.start(
+                idx,
+                self.sim.poses[idx],
+                [self.world.robots[i].footprint for i in idx],
+                self.sim.max_speed[idx],
+                self.sim.max_accel[idx],
+                cmd,
+                self.t,
+            )
+        except (ValueError, FormationError) as exc:
+            return self._refuse("formation", str(exc))
+        self._leave_groups(idx)
+        self.formations.append(run)
+        self._set_goals(idx, run.goals)
+        return self._accept(
+            "formation",
+            robots=[self.ids[i] for i in idx],
+            plan_duration_s=round(float(run.adjuster.plan.duration_s), 3),
+        )
+
+    def _formation_mask(self) -> np.ndarray:
+        """Robots currently driven by a formation plan (until it ends, plus a grace time)."""
+        mask = np.zeros(self.sim.n, dtype=bool)
+        for f in self.formations:
+            if self.t - f.t0 <= f.adjuster.plan.duration_s + FORMATION_GRACE_S:
+                mask[f.idx] = True
+        return mask
+
     def stop(self, names) -> Outcome:
         idx = self._robot_indices(names, "stop")
         if isinstance(idx, str):
@@ -390,6 +436,7 @@ class Supervisor:
         return self._accept("release", robot=robot)
 
     def _leave_groups(self, idx: np.ndarray) -> None:
+        self.formations = [f for f in self.formations if not np.isin(f.idx, idx).any()]
         keep = []
         for g in self.groups:
             mask = ~np.isin(g.robots, idx)
@@ -457,7 +504,11 @@ class Supervisor:
             poses=sim.poses.copy(),
             vel=sim.vel.copy(),
             goals=self.goals.copy(),
-            active=self.has_goal & ~self.stopped & ~self.teleop & (not self.estopped),
+            active=self.has_goal
+            & ~self.stopped
+            & ~self.teleop
+            & (not self.estopped)
+            & ~self._formation_mask(),
             priority=self.priority.copy(),
             footprints=tuple(sim.footprints),
             max_speed=sim.max_speed,
@@ -490,6 +541,17 @@ class Supervisor:
         view = self.view()
         cmd = np.asarray(self.controller.compute(view), float).reshape(self.sim.n, 2)
         cmd[~view.active] = 0.0
+        for f in self.formations:
+            if self.t - f.t0 <= f.adjuster.plan.duration_s + FORMATION_GRACE_S:
+                go = ~self.stopped[f.idx] & ~self.teleop[f.idx] & (not self.estopped)
+                fc = f.command(
+                    self.t,
+                    self.sim.poses[f.idx],
+                    view.people_xy,
+                    self.sim.max_speed[f.idx],
+                    self.sim.max_yaw_rate[f.idx],
+                )
+                cmd[f.idx] = np.where(go[:, None], fc, 0.0)
         fresh = self.teleop & (self.t - self._teleop_t <= TELEOP_TIMEOUT_S)
         cmd[fresh] = self._teleop_cmd[fresh]
         self.goal_changed[:] = False
