@@ -225,10 +225,11 @@ def _sector_pairs(
     radii: np.ndarray,
     owner: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Broad phase: (robot, object, beam) triples whose beam can meet the object's bounding disc.
+    """Broad phase: the beams of each robot that can meet each object's bounding disc.
 
     Each object (bounding disc ``centers``, ``radii``) is tested only against the beams inside
-    the angular sector it subtends from each sensor within range.
+    the angular sector it subtends from each sensor within range. Returns the (robot, object)
+    pairs ``rn, on`` ``(Q,)`` and, per candidate beam, its pair ``(R,)`` and beam index ``(R,)``.
     """
     b = spec.num_beams
     rel = centers[None, :, :] - sensors[:, None, :2]  # (N, M, 2)
@@ -239,7 +240,7 @@ def _sector_pairs(
     rn, on = np.nonzero(near)
     if len(rn) == 0:
         empty = np.zeros(0, dtype=np.int64)
-        return empty, empty, empty
+        return empty, empty, empty, empty
     d = dist[rn, on]
     bearing = np.arctan2(rel[rn, on, 1], rel[rn, on, 0]) - sensors[rn, 2]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -267,31 +268,49 @@ def _sector_pairs(
     beam = lo[pair] + offset
     if spec.full_circle:
         beam %= b
-    return rn[pair], on[pair], beam
+    return rn, on, pair, beam
+
+
+def _edge_planes(polys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Outward edge normals ``nx, ny`` ``(..., K)`` of counter-clockwise polygons and offsets
+    ``c = n . p_k``, so that a point ``q`` is inside when ``n . q <= c`` for every edge."""
+    edge = np.roll(polys, -1, axis=-2) - polys
+    nx, ny = edge[..., 1], -edge[..., 0]
+    return nx, ny, nx * polys[..., 0] + ny * polys[..., 1]
+
+
+def _convex_entry(num: np.ndarray, denom: np.ndarray) -> np.ndarray:
+    """Cyrus-Beck clipping from ``num = c - n . o`` and ``denom = n . d`` ``(R, K)``: entry
+    distance ``(R,)`` of each ray into its polygon, ``inf`` on a miss, 0 from inside."""
+    r = num.shape[0]
+    t_enter = np.full(r, -np.inf)
+    t_exit = np.full(r, np.inf)
+    miss = np.zeros(r, dtype=bool)
+    # One edge at a time over 1-D arrays: K is 3 or 4, and numpy reduces a short last axis
+    # slowly.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(num.shape[1]):
+            nk, dk = num[:, k], denom[:, k]
+            tk = nk / dk
+            # Inside means n . (o + t d) <= c, i.e. t * denom <= num.
+            entering = dk < -PARALLEL_EPS
+            leaving = dk > PARALLEL_EPS
+            np.maximum(t_enter, np.where(entering, tk, -np.inf), out=t_enter)
+            np.minimum(t_exit, np.where(leaving, tk, np.inf), out=t_exit)
+            # A ray parallel to an edge and outside its half-plane misses; degenerate
+            # (repeated-vertex) edges have normal 0 and num 0, which constrains nothing.
+            miss |= ~entering & ~leaving & (nk < -1e-12)
+    ok = ~miss & (t_enter <= t_exit) & (t_exit >= 0)
+    return np.where(ok, np.maximum(t_enter, 0.0), np.inf)
 
 
 def _ray_convex(o: np.ndarray, d: np.ndarray, polys: np.ndarray) -> np.ndarray:
     """Entry distance ``(R,)`` of rays (origins, unit directions ``(R, 2)``) into convex
-    counter-clockwise polygons ``(R, K, 2)`` (Cyrus-Beck clipping); ``inf`` on a miss and 0 when
-    the origin is inside."""
-    nxt = np.roll(polys, -1, axis=1)
-    edge = nxt - polys
-    normal = np.stack([edge[..., 1], -edge[..., 0]], -1)  # outward for counter-clockwise
-    denom = np.einsum("rkd,rd->rk", normal, d)
-    num = np.einsum("rkd,rkd->rk", normal, polys - o[:, None, :])  # n . (p_k - o)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tk = num / denom
-    # Inside means n . (o + t d - p_k) <= 0 for every edge, i.e. t*denom <= num.
-    entering = denom < -PARALLEL_EPS
-    leaving = denom > PARALLEL_EPS
-    parallel = ~entering & ~leaving
-    # A ray parallel to an edge and outside its half-plane (num < 0) misses; degenerate
-    # (repeated-vertex) edges have normal 0 and num 0, which constrains nothing.
-    miss = np.any(parallel & (num < -1e-12), axis=1)
-    t_enter = np.max(np.where(entering, tk, -np.inf), axis=1)
-    t_exit = np.min(np.where(leaving, tk, np.inf), axis=1)
-    ok = ~miss & (t_enter <= t_exit) & (t_exit >= 0)
-    return np.where(ok, np.maximum(t_enter, 0.0), np.inf)
+    counter-clockwise polygons ``(R, K, 2)``; ``inf`` on a miss and 0 from inside."""
+    nx, ny, c = _edge_planes(polys)
+    num = c - (nx * o[:, 0:1] + ny * o[:, 1:2])
+    denom = nx * d[:, 0:1] + ny * d[:, 1:2]
+    return _convex_entry(num, denom)
 
 
 def _ray_disc(o: np.ndarray, d: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -384,22 +403,32 @@ def scan(
                 )
         centers = polys.mean(axis=1)
         radii = np.linalg.norm(polys - centers[:, None, :], axis=-1).max(axis=1)
-        rob, obj, beam = _sector_pairs(spec, sensors, centers, radii, owner)
-        if len(rob):
-            ray = rob * b + beam
-            t = _ray_convex(origins[ray], dirs[ray], polys[obj])
-            np.minimum.at(ranges, ray, t)
+        rn, on, pair, beam = _sector_pairs(spec, sensors, centers, radii, owner)
+        if len(pair):
+            # Per (robot, polygon) pair the edge planes relative to the sensor; per beam only
+            # the direction changes.
+            nx, ny, c = _edge_planes(polys)
+            nxp, nyp = nx[on], ny[on]
+            nump = c[on] - (nxp * sensors[rn, 0:1] + nyp * sensors[rn, 1:2])
+            ray = rn[pair] * b + beam
+            d = dirs[ray]
+            denom = nxp[pair] * d[:, 0:1] + nyp[pair] * d[:, 1:2]
+            t = _convex_entry(nump[pair], denom)
+            hit = t < spec.max_range_m
+            np.minimum.at(ranges, ray[hit], t[hit])
 
     if discs is not None and len(discs):
         cen = np.asarray(discs, dtype=float).reshape(-1, 2)
         rad = np.broadcast_to(np.asarray(disc_radii, dtype=float), (len(cen),))
         if np.any(rad <= 0):
             raise ValueError(f"scan: disc_radii must be > 0 (got {rad.tolist()})")
-        rob, obj, beam = _sector_pairs(spec, sensors, cen, rad, None)
-        if len(rob):
-            ray = rob * b + beam
+        rn, on, pair, beam = _sector_pairs(spec, sensors, cen, rad, None)
+        if len(pair):
+            ray = rn[pair] * b + beam
+            obj = on[pair]
             t = _ray_disc(origins[ray], dirs[ray], cen[obj], rad[obj])
-            np.minimum.at(ranges, ray, t)
+            hit = t < spec.max_range_m
+            np.minimum.at(ranges, ray[hit], t[hit])
 
     ranges = ranges.reshape(n, b)
     ranges[ranges > spec.max_range_m] = np.inf

@@ -40,6 +40,8 @@ __all__ = [
 MIN_TRANSLATION_FOR_HEADING_M = 0.01
 #: Distance given to scan end points off the map (far enough for the Gaussian to vanish).
 OFF_MAP_DISTANCE_M = 1e3
+#: Particles scored per block (bounds the size of temporaries).
+SCORE_BLOCK = 4096
 #: Bisection steps when choosing the tempering exponent (resolution 2**-12).
 TEMPER_BISECTIONS = 12
 
@@ -104,6 +106,11 @@ class LikelihoodField:
         self.distance_m = ndimage.distance_transform_edt(~on_obstacle) * self.step_m
         self.log_p = self._log_p(self.distance_m)
         self.log_p_off_map = float(np.log(self.z_rand / self.max_range_m))
+        # Lookup tables with a ring of off-map values: clipping an index then lands on it.
+        self._distance_padded = np.pad(self.distance_m, 1, constant_values=OFF_MAP_DISTANCE_M)
+        self._log_p_padded = np.pad(self.log_p, 1, constant_values=self.log_p_off_map).astype(
+            np.float32
+        )
         # Where the filter may place particles: known free cells with enough clearance.
         free = ~grid.occupied & ~grid.unknown
         clear = grid.distance_field() >= min_clearance_m
@@ -117,26 +124,32 @@ class LikelihoodField:
         gauss = np.exp(-0.5 * (d / self.sigma_hit_m) ** 2) / (np.sqrt(2 * np.pi) * self.sigma_hit_m)
         return np.log(self.z_hit * gauss + self.z_rand / self.max_range_m)
 
-    def _lookup(self, table: np.ndarray, xy: np.ndarray, off_map: float) -> np.ndarray:
-        xy = np.asarray(xy, dtype=float)
-        j = np.rint((xy[..., 0] - self.origin[0]) / self.step_m).astype(np.int64)
-        i = np.rint((xy[..., 1] - self.origin[1]) / self.step_m).astype(np.int64)
+    def _lookup(self, table: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Nearest-lattice lookup in a table padded with one ring of the off-map value."""
         rows, cols = table.shape
-        inside = (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
-        flat = np.where(inside, i * cols + j, 0)
-        return np.where(inside, table.ravel()[flat], off_map)
+        j = np.rint((x - self.origin[0]) * (1.0 / self.step_m)).astype(np.int64) + 1
+        i = np.rint((y - self.origin[1]) * (1.0 / self.step_m)).astype(np.int64) + 1
+        np.clip(j, 0, cols - 1, out=j)
+        np.clip(i, 0, rows - 1, out=i)
+        return table.ravel()[i * cols + j]
 
     def distance(self, xy: np.ndarray) -> np.ndarray:
         """Distance (metres, to half a cell) from world points ``(..., 2)`` to the nearest
         obstacle. Points outside the map count as far from everything
         (:data:`OFF_MAP_DISTANCE_M`), as in amcl: a particle that drifted off the map must not
         score its scan as hits on the edge."""
-        return self._lookup(self.distance_m, xy, OFF_MAP_DISTANCE_M)
+        xy = np.asarray(xy, dtype=float)
+        return self._lookup(self._distance_padded, xy[..., 0], xy[..., 1])
 
     def log_likelihood(self, xy: np.ndarray) -> np.ndarray:
         """Log of the per-beam likelihood ``z_hit * N(d; 0, sigma) + z_rand / max_range`` at
         world end points ``(..., 2)``."""
-        return self._lookup(self.log_p, xy, self.log_p_off_map)
+        xy = np.asarray(xy, dtype=float)
+        return self.log_likelihood_xy(xy[..., 0], xy[..., 1])
+
+    def log_likelihood_xy(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """As :meth:`log_likelihood` for separate coordinate arrays (no stacking)."""
+        return self._lookup(self._log_p_padded, x, y)
 
     def sample_free(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` poses uniform over free space (cell, then a point in it) and heading."""
@@ -460,14 +473,18 @@ class ParticleFilter:
             return np.zeros(len(particles))
         r = np.asarray(ranges, dtype=float).reshape(-1)[beams]
         a = self._beam_dirs[beams]
-        # End points in the body frame (mount offset included), then to world per particle.
+        # End points in the body frame (mount offset included), then to world per particle,
+        # in blocks so that the temporaries stay small when scoring many candidates.
         bx = self.spec.mount_x_m + r * np.cos(a)
         by = self.spec.mount_y_m + r * np.sin(a)
-        c, s = np.cos(particles[:, 2:3]), np.sin(particles[:, 2:3])
-        wx = particles[:, 0:1] + c * bx - s * by
-        wy = particles[:, 1:2] + s * bx + c * by
-        ll = self.field.log_likelihood(np.stack([wx, wy], -1))
-        return ll.mean(axis=1)
+        out = np.empty(len(particles))
+        for lo in range(0, len(particles), SCORE_BLOCK):
+            p = particles[lo : lo + SCORE_BLOCK]
+            c, s = np.cos(p[:, 2:3]), np.sin(p[:, 2:3])
+            wx = p[:, 0:1] + c * bx - s * by
+            wy = p[:, 1:2] + s * bx + c * by
+            out[lo : lo + SCORE_BLOCK] = self.field.log_likelihood_xy(wx, wy).mean(axis=1)
+        return out
 
     def update(self, ranges: np.ndarray) -> dict:
         """Weigh particles by a scan ``(B,)`` (ranges as from :func:`~.lidar.scan`), then
