@@ -105,13 +105,16 @@ class Session:
         self.clients: set[Client] = set()
         self.tick_ms: deque[float] = deque(maxlen=TICK_HISTORY)
         self.frame_ms: deque[float] = deque(maxlen=TICK_HISTORY)
-        #: Per paced frame: (ticks run, CPU ms of ticks + broadcast, delta bytes).
-        self.perf: deque[tuple[int, float, int]] = deque(maxlen=PERF_HISTORY)
+        #: Per paced frame: ticks run, CPU ms of ticks + broadcast, delta bytes, wall ms of
+        #: the ticks, wall ms of encoding the frame.
+        self.perf: deque[tuple[int, float, int, float, float]] = deque(maxlen=PERF_HISTORY)
         self.frames_sent = 0
+        self.frames_paced = 0
         self.last_message_bytes = 0
         self._task: asyncio.Task | None = None
         self._budget_s = 0.0
         self._rate = 0.0
+        self._tick_wall_ms = 0.0
         self.load(scenario_path, scripted=scripted)
 
     # ------------------------------------------------------------------ scenario
@@ -208,7 +211,9 @@ class Session:
         self._keep_teleop_alive()
         t0 = time.perf_counter()
         self.sup.tick()
-        self.tick_ms.append((time.perf_counter() - t0) * 1e3)
+        ms = (time.perf_counter() - t0) * 1e3
+        self.tick_ms.append(ms)
+        self._tick_wall_ms += ms
 
     def step(self, ticks: int) -> None:
         """Run ``ticks`` ticks now; a failing tick pauses the session with :attr:`error`."""
@@ -280,12 +285,15 @@ class Session:
         self.frame_ms.append((time.perf_counter() - t0) * 1e3)
         return len(d_msg)
 
-    def perf_report(self) -> dict:
-        """Server load over the last :data:`PERF_HISTORY` paced frames."""
+    def perf_report(self, frames: int | None = None) -> dict:
+        """Server load over the last ``frames`` (at most :data:`PERF_HISTORY`) paced frames."""
         rows = list(self.perf)
+        if frames is not None:
+            rows = rows[-frames:] if frames > 0 else []
         ticks = sum(r[0] for r in rows)
         cpu = [r[1] for r in rows]
         sizes = [r[2] for r in rows if r[2] > 0]
+        enc = [r[4] for r in rows if r[2] > 0]
         return {
             "frames": len(rows),
             "ticks": ticks,
@@ -294,12 +302,14 @@ class Session:
             "cpu_ms_per_tick": round(sum(cpu) / ticks, 3) if ticks else None,
             "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 3) if cpu else None,
             "cpu_ms_per_frame_p99": round(float(np.percentile(cpu, 99)), 3) if cpu else None,
-            "tick_ms_mean": round(float(np.mean(self.tick_ms)), 3) if self.tick_ms else None,
-            "encode_ms_mean": round(float(np.mean(self.frame_ms)), 3) if self.frame_ms else None,
+            "cpu_ms_per_frame_max": round(max(cpu), 3) if cpu else None,
+            "tick_wall_ms_mean": round(sum(r[3] for r in rows) / ticks, 3) if ticks else None,
+            "encode_wall_ms_mean": round(float(np.mean(enc)), 3) if enc else None,
             "message_bytes_mean": round(float(np.mean(sizes)), 1) if sizes else None,
             "message_bytes_max": max(sizes) if sizes else None,
             "process_cpu_s": round(time.process_time(), 4),
             "frames_sent": self.frames_sent,
+            "frames_paced": self.frames_paced,
             "sim_t_s": round(self.sup.t, 3),
         }
 
@@ -316,6 +326,7 @@ class Session:
             now = loop.time()
             elapsed, last = now - last, now
             cpu0 = time.process_time()
+            self._tick_wall_ms = 0.0
             ran = 0
             try:
                 # After a stall (a laptop lid, a long plan) do not race to catch up.
@@ -327,7 +338,16 @@ class Session:
                 self._rate = sim_dt / (now - rate_t) if sim_dt >= 0 else 0.0
                 rate_t, rate_sim = now, self.sup.t
             nbytes = self.broadcast()
-            self.perf.append((ran, (time.process_time() - cpu0) * 1e3, nbytes))
+            self.perf.append(
+                (
+                    ran,
+                    (time.process_time() - cpu0) * 1e3,
+                    nbytes,
+                    self._tick_wall_ms,
+                    self.frame_ms[-1] if nbytes and self.frame_ms else 0.0,
+                )
+            )
+            self.frames_paced += 1
             next_frame += period
             delay = next_frame - loop.time()
             if delay < 0:

@@ -6,8 +6,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+from typing import Annotated
 
-from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import Response
 
 from ..deps import SessionDep, has_control
@@ -48,11 +49,14 @@ async def state(session: SessionDep) -> dict:
 
 
 @router.get("/perf", summary="Server load: CPU per tick, frame sizes, tick times")
-async def perf(session: SessionDep) -> dict:
-    """Over the last 2000 paced frames: CPU (process time) of the ticks plus the broadcast,
-    per tick and per frame; the mean and largest delta message; ``process_cpu_s`` is the
-    server process's CPU time so far (sample it twice for the whole server's load)."""
-    return session.perf_report()
+async def perf(
+    session: SessionDep, frames: Annotated[int | None, Query(ge=1, le=2000)] = None
+) -> dict:
+    """Over the last ``frames`` (default and most: 2000) paced frames: CPU (process time) of
+    the ticks plus the broadcast, per tick and per frame; the mean and largest delta message;
+    ``process_cpu_s`` is the server process's CPU time so far (sample it twice for the whole
+    server's load, WebSocket sends included)."""
+    return session.perf_report(frames)
 
 
 @router.get("/auth", response_model=AuthStatus, summary="Does this client hold the token?")
