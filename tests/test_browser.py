@@ -358,3 +358,33 @@ def test_read_only_viewer_and_token_unlock(browser):
         pg.click("#resume-all")
         pg.wait_for_function("window.swarmpark.S.frame.estop === false")
         pg.close()
+
+
+def test_click_shift_click_pan_and_zoom(page, server):
+    pg = page
+    pg.mouse.click(*screen(pg, 2.0, 2.0))
+    pg.keyboard.down("Shift")
+    pg.mouse.click(*screen(pg, 2.0, 4.8))
+    pg.mouse.click(*screen(pg, 2.0, 6.2))
+    pg.mouse.click(*screen(pg, 2.0, 2.0))  # shift-click again takes it out
+    pg.keyboard.up("Shift")
+    assert pg.inner_text("#sel-list").split() == ["s3", "s4"]
+    pg.mouse.click(*screen(pg, 5.0, 7.5))  # a click on empty floor clears the selection
+    assert pg.text_content("#sel-count") == "(none)"
+    scale = px_m(pg)
+    pg.mouse.move(*screen(pg, 6.0, 4.0))
+    pg.mouse.wheel(0, -400)  # zoom in about the cursor: the point under it stays put
+    pg.wait_for_function(f"window.swarmpark.S.view.scale > {scale * 1.5}")
+    box = pg.locator("#map").bounding_box()
+    x, y = screen(pg, 6.0, 4.0)
+    here = pg.evaluate("([x, y]) => window.swarmpark.toWorld(x, y)", [x - box["x"], y - box["y"]])
+    assert abs(here[0] - 6.0) < 1e-6 and abs(here[1] - 4.0) < 1e-6
+    a = screen(pg, 6.0, 4.0)
+    pg.mouse.move(*a)
+    pg.mouse.down(button="right")
+    pg.mouse.move(a[0] + 100, a[1] + 50, steps=4)
+    pg.mouse.up(button="right")
+    b = screen(pg, 6.0, 4.0)
+    assert abs(b[0] - a[0] - 100) < 1 and abs(b[1] - a[1] - 50) < 1  # the map moved with it
+    pg.click("#zoom-fit")
+    assert abs(px_m(pg) - scale) < 1e-6

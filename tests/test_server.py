@@ -663,3 +663,20 @@ def test_serve_command_bad_input_is_one_line_and_exit_2(capsys, argv, msg):
     assert serve_command(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and msg in err and err.startswith("swarmpark serve: error:")
+
+
+def test_people_are_streamed_with_their_radius(tmp_path):
+    text = SMALL.read_text() + (
+        "obstacles:\n"
+        "  - {id: walker, radius_m: 0.35, waypoints: [[5, 7.5], [11, 7.5]], speed_mps: 1.0}\n"
+        "  - polygon: [[9, 0.5], [9.5, 0.5], [9.5, 1], [9, 1]]\n"
+    )
+    path = tmp_path / "people.yaml"
+    path.write_text(text)
+    c = TestClient(create_app(path, autostart=False, scenarios_dir=tmp_path))
+    world = c.get("/api/world").json()
+    assert world["people"] == [{"id": "walker", "radius_m": 0.35}]
+    assert world["obstacles"] == [[[9.0, 0.5], [9.5, 0.5], [9.5, 1.0], [9.0, 1.0]]]
+    assert state(c)["people"] == [[5.0, 7.5]]
+    step(c, 20)  # 1 s at 1 m/s along +x
+    assert state(c)["people"] == [[6.0, 7.5]]
