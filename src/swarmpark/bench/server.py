@@ -135,12 +135,13 @@ def measure(n: int, seconds: float) -> dict:
             # stall of seconds at N = 100, reported as plan_stall_ms); then all of them drive.
             while _get(base + "/api/sim")["t_s"] < WARMUP_SIM_S:
                 time.sleep(0.2)
-            p0, s0 = _get(base + "/api/perf"), _get(base + "/api/sim")
-            stall = _get(base + "/api/perf")["cpu_ms_per_frame_max"]
-            w0 = time.monotonic()
+            p0 = _get(base + "/api/perf")
+            stall = p0["cpu_ms_per_frame_max"]
             time.sleep(seconds)
-            p1, s1 = _get(base + "/api/perf"), _get(base + "/api/sim")
-            wall = time.monotonic() - w0
+            p1 = _get(base + "/api/perf")
+            # Rates from the server's own stamps (CLOCK_MONOTONIC, shared by both processes):
+            # a late answer must not stretch or shrink the window.
+            w0, wall = p0["monotonic_s"], p1["monotonic_s"] - p0["monotonic_s"]
             frames = max(p1["frames_paced"] - p0["frames_paced"], 1)
             window = _get(base + f"/api/perf?frames={min(frames, 2000)}")
             state = _get(base + "/api/state")
@@ -154,7 +155,7 @@ def measure(n: int, seconds: float) -> dict:
                 proc.wait(10)
             except subprocess.TimeoutExpired:
                 proc.kill()
-    ticks = s1["ticks"] - s0["ticks"]
+    ticks = p1["ticks_total"] - p0["ticks_total"]
     moving = sum(1 for r in state["robots"] if abs(r[4]) > 1e-3)
     sizes = [s for v in viewers for s in v.sizes if v.times and s > 0]
     recv_hz = [sum(1 for t in v.times if w0 <= t <= w0 + wall) / wall for v in viewers if v.times]
@@ -166,7 +167,7 @@ def measure(n: int, seconds: float) -> dict:
         "measured_s": round(wall, 2),
         "ticks_per_s": round(ticks / wall, 2),
         "frames_per_s": round((p1["frames_sent"] - p0["frames_sent"]) / wall, 2),
-        "sim_rate": round((s1["t_s"] - s0["t_s"]) / wall, 3),
+        "sim_rate": round((p1["sim_t_s"] - p0["sim_t_s"]) / wall, 3),
         "moving_at_end": moving,
         "plan_stall_ms": stall,
         "cpu_ms_per_tick": window["cpu_ms_per_tick"],

@@ -40,6 +40,8 @@ TELEOP_DEADMAN_S = 0.5
 CLIENT_QUEUE = 4
 #: Wall-clock tick timings kept for the status panel.
 TICK_HISTORY = 200
+#: Least time the pacing task sleeps per frame (s), even when it is behind.
+MIN_YIELD_S = 0.003
 #: Paced frames kept for GET /api/perf.
 PERF_HISTORY = 2000
 
@@ -115,6 +117,7 @@ class Session:
         self._budget_s = 0.0
         self._rate = 0.0
         self._tick_wall_ms = 0.0
+        self._cpu_ms = 0.0
         self.load(scenario_path, scripted=scripted)
 
     # ------------------------------------------------------------------ scenario
@@ -209,11 +212,12 @@ class Session:
     def tick(self) -> None:
         """One fixed step of the core (timed for the status panel)."""
         self._keep_teleop_alive()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         self.sup.tick()
         ms = (time.perf_counter() - t0) * 1e3
         self.tick_ms.append(ms)
         self._tick_wall_ms += ms
+        self._cpu_ms += (time.process_time() - c0) * 1e3
 
     def step(self, ticks: int) -> None:
         """Run ``ticks`` ticks now; a failing tick pauses the session with :attr:`error`."""
@@ -230,20 +234,24 @@ class Session:
         self.error = f"simulation stopped: {type(exc).__name__}: {exc}"
         self.paused = True
 
-    def advance(self, wall_elapsed_s: float) -> int:
-        """Run the ticks due after ``wall_elapsed_s`` of wall time; returns how many ran."""
+    def due(self, wall_elapsed_s: float) -> int:
+        """How many ticks are due after ``wall_elapsed_s`` more of wall time (consumed)."""
         if self.paused or self.error:
             self._budget_s = 0.0
             return 0
         dt = self.sup.sim.dt
         self._budget_s += wall_elapsed_s * self.speed
-        n = 0
-        while self._budget_s >= dt - 1e-9 and n < MAX_TICKS_PER_FRAME:
-            self.tick()
-            self._budget_s -= dt
-            n += 1
+        n = min(int((self._budget_s + 1e-9) // dt), MAX_TICKS_PER_FRAME)
+        self._budget_s -= n * dt
         if n == MAX_TICKS_PER_FRAME:
             self._budget_s = min(self._budget_s, dt)  # fall behind rather than pile up
+        return n
+
+    def advance(self, wall_elapsed_s: float) -> int:
+        """Run the ticks due after ``wall_elapsed_s`` of wall time; returns how many ran."""
+        n = self.due(wall_elapsed_s)
+        for _ in range(n):
+            self.tick()
         return n
 
     # ------------------------------------------------------------------ frames
@@ -272,7 +280,7 @@ class Session:
         """Encode one frame and queue it to every client; returns the delta's size in bytes."""
         if not self.clients:
             return 0
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         self.seq += 1
         want_full = any(c.needs_full for c in self.clients)
         delta, full = self.encoder.frame(self.sim_extra(), want_full=want_full)
@@ -283,6 +291,7 @@ class Session:
         self.last_message_bytes = len(d_msg)
         self.frames_sent += 1
         self.frame_ms.append((time.perf_counter() - t0) * 1e3)
+        self._cpu_ms += (time.process_time() - c0) * 1e3
         return len(d_msg)
 
     def perf_report(self, frames: int | None = None) -> dict:
@@ -311,6 +320,8 @@ class Session:
             "frames_sent": self.frames_sent,
             "frames_paced": self.frames_paced,
             "sim_t_s": round(self.sup.t, 3),
+            "ticks_total": self.sup.sim.tick,
+            "monotonic_s": round(time.monotonic(), 4),
         }
 
     # ------------------------------------------------------------------ the pacing task
@@ -325,12 +336,19 @@ class Session:
         while True:
             now = loop.time()
             elapsed, last = now - last, now
-            cpu0 = time.process_time()
-            self._tick_wall_ms = 0.0
+            self._tick_wall_ms = self._cpu_ms = 0.0
             ran = 0
+            # After a stall (a laptop lid, a long plan) do not race to catch up.
+            n = self.due(min(elapsed, 5 * period))
             try:
-                # After a stall (a laptop lid, a long plan) do not race to catch up.
-                ran = self.advance(min(elapsed, 5 * period))
+                for k in range(n):
+                    if self.paused or self.error:
+                        break
+                    if k:
+                        # Let waiting commands land between the ticks of a catch-up burst.
+                        await asyncio.sleep(0)
+                    self.tick()
+                    ran += 1
             except Exception as exc:
                 self._fail(exc)
             if now - rate_t >= 1.0:
@@ -341,7 +359,7 @@ class Session:
             self.perf.append(
                 (
                     ran,
-                    (time.process_time() - cpu0) * 1e3,
+                    self._cpu_ms,
                     nbytes,
                     self._tick_wall_ms,
                     self.frame_ms[-1] if nbytes and self.frame_ms else 0.0,
@@ -350,8 +368,10 @@ class Session:
             self.frames_paced += 1
             next_frame += period
             delay = next_frame - loop.time()
-            if delay < 0:
-                next_frame, delay = loop.time(), 0.0
+            if delay < MIN_YIELD_S:
+                # Behind: still give the loop a few milliseconds for I/O, so requests (an
+                # e-stop) are read and answered instead of waiting behind the ticks.
+                next_frame, delay = loop.time(), MIN_YIELD_S
             await asyncio.sleep(delay)
 
     def start(self) -> None:
