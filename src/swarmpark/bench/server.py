@@ -145,6 +145,15 @@ def measure(n: int, seconds: float) -> dict:
             frames = max(p1["frames_paced"] - p0["frames_paced"], 1)
             window = _get(base + f"/api/perf?frames={min(frames, 2000)}")
             state = _get(base + "/api/state")
+            # The operator's e-stop under this load: request to answer, then to a halted frame.
+            t_e = time.monotonic()
+            req = urllib.request.Request(base + "/api/estop", data=b"", method="POST")
+            with urllib.request.urlopen(req, timeout=30) as r:
+                r.read()
+            estop_rtt = (time.monotonic() - t_e) * 1e3
+            while any(abs(row[4]) > 0 for row in _get(base + "/api/state")["robots"]):
+                time.sleep(0.005)
+            estop_halt = (time.monotonic() - t_e) * 1e3
         finally:
             for v in viewers:
                 v.stop.set()
@@ -175,6 +184,8 @@ def measure(n: int, seconds: float) -> dict:
         "server_cpu_pct": round(100 * server_cpu / 1e3 / wall, 1),
         "tick_wall_ms": window["tick_wall_ms_mean"],
         "encode_wall_ms": window["encode_wall_ms_mean"],
+        "estop_rtt_ms": round(estop_rtt, 1),
+        "estop_to_halt_ms": round(estop_halt, 1),
         "msg_bytes_mean": round(float(np.mean(sizes)), 1) if sizes else None,
         "msg_bytes_max": max(sizes) if sizes else None,
         "full_frame_bytes": max((v.first_bytes for v in viewers), default=None),

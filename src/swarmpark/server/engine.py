@@ -247,6 +247,11 @@ class Session:
             self._budget_s = min(self._budget_s, dt)  # fall behind rather than pile up
         return n
 
+    def _carry(self, ticks: int, max_wall_s: float) -> None:
+        """Put ``ticks`` back into the budget, keeping at most ``max_wall_s`` of backlog."""
+        dt = self.sup.sim.dt
+        self._budget_s = min(self._budget_s + ticks * dt, max(max_wall_s * self.speed, dt))
+
     def advance(self, wall_elapsed_s: float) -> int:
         """Run the ticks due after ``wall_elapsed_s`` of wall time; returns how many ran."""
         n = self.due(wall_elapsed_s)
@@ -345,7 +350,12 @@ class Session:
                     if self.paused or self.error:
                         break
                     if k:
-                        # Let waiting commands land between the ticks of a catch-up burst.
+                        if loop.time() - now > period:
+                            # Ticks slower than real time: send a frame first and run the rest
+                            # later (the simulation falls behind, the view stays live).
+                            self._carry(n - k, 5 * period)
+                            break
+                        # Let waiting commands land between the ticks of a burst.
                         await asyncio.sleep(0)
                     self.tick()
                     ran += 1
