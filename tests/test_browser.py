@@ -252,9 +252,12 @@ def test_estop_key_halts_every_skid_within_one_tick(page, server):
     set_speed(server, 2.0)
     server.call("POST", "/api/park", {"robots": ROBOTS, "boundary": [list(v) for v in BOX]})
     pg.wait_for_function("window.swarmpark.S.frame.robots.every(r => Math.abs(r[4]) > 0.05)")
-    pg.locator("#map").focus()
+    # Space is the e-stop wherever the focus is, even on a button (which must not "click").
+    pg.focus("#zoom-in")
+    scale = px_m(pg)
     pg.keyboard.press("Space")
     pg.wait_for_function("window.swarmpark.S.frame.estop === true")
+    assert px_m(pg) == scale
     pg.wait_for_timeout(1000)
     frame = pg.evaluate("window.swarmpark.S.frame")
     frames = pg.evaluate("window.swarmpark.S.frames")

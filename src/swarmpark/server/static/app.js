@@ -636,12 +636,20 @@ function typing(ev) {
   return t && (t.tagName === "INPUT" || t.tagName === "SELECT" || t.tagName === "TEXTAREA");
 }
 
+// Fields where Space is text: everywhere else Space is the e-stop.
+function textEntry(ev) {
+  const t = ev.target;
+  if (!t) return false;
+  if (t.tagName === "TEXTAREA") return true;
+  return t.tagName === "INPUT" && ["text", "number", "password", "search"].includes(t.type);
+}
+
 const TELEOP_KEYS = ["ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight"];
 
 window.addEventListener("keydown", (ev) => {
-  if (ev.code === "Space" && !(typing(ev) && ev.target.type !== "checkbox")) {
+  if (ev.code === "Space" && !textEntry(ev)) {
     ev.preventDefault();
-    estop();
+    if (!ev.repeat) estop();
     return;
   }
   if (TELEOP_KEYS.includes(ev.key) && !typing(ev)) {
@@ -664,7 +672,11 @@ window.addEventListener("keydown", (ev) => {
   S.dirty = true;
 });
 
-window.addEventListener("keyup", (ev) => { S.teleop.keys.delete(ev.key); });
+window.addEventListener("keyup", (ev) => {
+  S.teleop.keys.delete(ev.key);
+  // A focused button would also "click" on Space's keyup: the e-stop key does nothing else.
+  if (ev.code === "Space" && !textEntry(ev)) ev.preventDefault();
+});
 window.addEventListener("blur", () => S.teleop.keys.clear());
 
 // ------------------------------------------------------------------ commands
