@@ -8,16 +8,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon, box
 
-from swarmpark.geometry import wrap_angle
+from swarmpark.geometry import Footprint, footprint_corners, wrap_angle
 from swarmpark.gridmap import OccupancyGrid, grid_from_walls
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.localize import (
     FilterConfig,
+    FleetLocalizer,
     LikelihoodField,
     OdometryDrift,
     ParticleFilter,
     kld_sample_count,
     low_variance_resample,
+    pose_error_summary,
     relative_motion,
 )
 
@@ -312,6 +314,99 @@ def test_odometry_drift_is_seeded_grows_and_misses_a_kidnapping():
     )
 
 
+def _fleet_run(
+    seed: int,
+    update_min_d_m: float = 0.0,
+    others_known: bool = True,
+    config: FilterConfig | None = None,
+    steps: int | None = None,
+):
+    """Three skids drive through the room seeing walls and each other's footprints."""
+    g = asymmetric_room()
+    gf = prepare_grid(g)
+    spec = LidarSpec(range_noise_std_m=0.01, dropout_prob=0.02)
+    fp = Footprint(length_m=1.25, width_m=0.75, pivot_from_rear_m=0.25)
+    routes = [
+        drive([[1.0, 3.5], [4.5, 4.3], [7.0, 4.2]]),
+        drive([[3.2, 3.0], [1.0, 2.6], [1.0, 1.0]]),
+        drive([[7.0, 2.2], [4.0, 1.5], [3.0, 2.3]]),
+    ]
+    t = min(len(r) for r in routes)
+    t = t if steps is None else min(t, steps)
+    truth = np.stack([r[:t] for r in routes], axis=1)  # (T, 3, 3)
+    rng = np.random.default_rng(seed)
+    loc = FleetLocalizer(
+        LikelihoodField(g, min_clearance_m=0.3),
+        spec,
+        truth[0],
+        rng=rng,
+        update_min_d_m=update_min_d_m,
+        footprint=fp if others_known else None,
+        config=config,
+    )
+    est = []
+    for poses in truth:
+        polys = footprint_corners(poses, np.broadcast_to(fp.corners_body(), (3, 4, 2)))
+        ranges = scan(spec, poses, gf, polygons=polys, polygon_owner=np.arange(3), rng=rng)
+        est.append(loc.step(poses, ranges))
+    return np.array(est), truth
+
+
+def test_fleet_localizer_tracks_every_skid_and_is_deterministic():
+    est, truth = _fleet_run(seed=4)
+    summary = pose_error_summary(est, truth)
+    assert summary["mean_m"] < 0.03
+    assert summary["max_m"] < 0.1
+    assert summary["max_yaw_rad"] < np.radians(3.0)
+    again, _ = _fleet_run(seed=4, steps=20)
+    np.testing.assert_array_equal(est[:20], again)
+    # Sensor updates only every 10 cm of travel: still tracking.
+    sparse, truth = _fleet_run(seed=4, update_min_d_m=0.1, steps=50)
+    assert pose_error_summary(sparse, truth)["mean_m"] < 0.05
+
+
+def test_occlusion_by_neighbours_does_not_trigger_recovery():
+    """Skids a metre apart hide walls from each other. Thrun's injection rule (recovery_ratio
+    1) reads that as a kidnapping and the estimates jump; the default rule, or masking the
+    beams that hit the neighbours' known footprints, keeps them tracking."""
+    thrun = FilterConfig(recovery_ratio=1.0)
+    est, truth = _fleet_run(seed=4, others_known=False, config=thrun, steps=45)
+    assert pose_error_summary(est, truth)["max_m"] > 0.5
+    est, truth = _fleet_run(seed=4, others_known=False, steps=45)
+    assert pose_error_summary(est, truth)["max_m"] < 0.1
+    est, truth = _fleet_run(seed=4, others_known=True, config=thrun, steps=45)
+    assert pose_error_summary(est, truth)["max_m"] < 0.1
+
+
+def test_beams_hitting_a_known_neighbour_are_masked():
+    g = asymmetric_room()
+    spec = LidarSpec()
+    fp = Footprint(length_m=1.25, width_m=0.75, pivot_from_rear_m=0.25)
+    poses = np.array([[2.8, 3.0, 0.0], [4.8, 3.0, 0.0]])  # skid 1 is 2 m ahead of skid 0
+    loc = FleetLocalizer(
+        LikelihoodField(g),
+        spec,
+        poses,
+        rng=np.random.default_rng(0),
+        footprint=fp,
+        other_skid_margin_m=0.25,
+    )
+    polys = footprint_corners(poses, np.broadcast_to(fp.corners_body(), (2, 4, 2)))
+    ranges = scan(spec, poses, g, polygons=polys, polygon_owner=np.arange(2))
+    mask = loc.other_skid_beams(ranges)
+    # Skid 1 grown by 0.25 m: its rear face 1.5 m ahead, 1.25 m wide, so +-22.6 deg.
+    half = np.degrees(np.arctan2(0.375 + 0.25, 1.5))
+    ang = np.arange(1000) * 0.36 - 180.0  # beam directions in degrees
+    assert np.all(mask[0, np.abs(ang) < half - 1.0])
+    assert not np.any(mask[0, np.abs(ang) > half + 1.0])
+    assert np.all(mask[1, np.abs(np.abs(ang) - 180.0) < 10.0])  # skid 0 behind skid 1
+
+
+def test_pose_error_summary_refuses_mismatched_shapes():
+    with pytest.raises(ValueError, match="must both be"):
+        pose_error_summary(np.zeros((4, 3)), np.zeros((4, 2)))
+
+
 @pytest.mark.parametrize(
     ("kwargs", "field"),
     [
@@ -323,6 +418,7 @@ def test_odometry_drift_is_seeded_grows_and_misses_a_kidnapping():
         ({"alpha_slow": 1.5}, "alpha_slow"),
         ({"likelihood_power": 0.0}, "likelihood_power"),
         ({"min_neff_ratio": 1.0}, "min_neff_ratio"),
+        ({"recovery_ratio": 0.0}, "recovery_ratio"),
     ],
 )
 def test_bad_filter_config_names_the_field(kwargs, field):

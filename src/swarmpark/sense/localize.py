@@ -11,7 +11,7 @@ the drifting wheel odometry a real skid reports.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -20,9 +20,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
 
-from swarmpark.geometry import wrap_angle
+from swarmpark.geometry import Footprint, footprint_corners, wrap_angle
 from swarmpark.gridmap import OccupancyGrid
-from swarmpark.sense.lidar import LidarSpec, beam_angles
+from swarmpark.sense.lidar import LidarSpec, beam_angles, scan
 
 __all__ = [
     "LikelihoodField",
@@ -30,6 +30,8 @@ __all__ = [
     "PoseEstimate",
     "ParticleFilter",
     "OdometryDrift",
+    "FleetLocalizer",
+    "pose_error_summary",
     "relative_motion",
     "low_variance_resample",
     "kld_sample_count",
@@ -198,6 +200,12 @@ class FilterConfig:
         particles are injected with probability ``max(0, 1 - w_fast / w_slow)``. Set
         ``alpha_fast = 0`` to turn injection off. The defaults react faster than amcl's
         (0.001, 0.1), whose long-term average takes minutes to settle.
+    recovery_ratio
+        Particles are injected with probability ``max(0, 1 - (w_fast / w_slow) /
+        recovery_ratio)``; Thrun's rule is ``recovery_ratio = 1``. Below 1 the filter ignores
+        dips of the fit that occlusion causes (a skid or a person in front of the scanner
+        lowers it by 10-15 %), while a kidnapping (a drop of a third and more) still triggers
+        recovery.
     """
 
     min_particles: int = 200
@@ -219,6 +227,7 @@ class FilterConfig:
     injection_candidates: int = 5000
     alpha_slow: float = 0.02
     alpha_fast: float = 0.2
+    recovery_ratio: float = 0.8
 
     def __post_init__(self) -> None:
         if not (1 <= self.min_particles <= self.max_particles):
@@ -247,6 +256,8 @@ class FilterConfig:
             )
         if not 0 <= self.min_neff_ratio < 1:
             raise ValueError(f"filter.min_neff_ratio must be in [0, 1) (got {self.min_neff_ratio})")
+        if not 0 < self.recovery_ratio <= 1:
+            raise ValueError(f"filter.recovery_ratio must be in (0, 1] (got {self.recovery_ratio})")
         if not self.likelihood_power > 0:
             raise ValueError(f"filter.likelihood_power must be > 0 (got {self.likelihood_power})")
 
@@ -468,32 +479,45 @@ class ParticleFilter:
     def scan_log_likelihood(self, particles: np.ndarray, ranges: np.ndarray) -> np.ndarray:
         """Log-likelihood ``(M,)`` of a scan at each of ``particles`` ``(M, 3)``, per beam
         (the mean over the scored beams, so it does not grow with their number)."""
+        return self._score(particles, ranges)[0]
+
+    def _score(self, particles: np.ndarray, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per particle: the mean log-likelihood of the scored beams (for the weights) and
+        their mean likelihood (for augmented MCL, see :meth:`update`)."""
         beams = self._beam_subset(ranges)
+        m = len(particles)
         if len(beams) == 0:
-            return np.zeros(len(particles))
+            return np.zeros(m), np.ones(m)
         r = np.asarray(ranges, dtype=float).reshape(-1)[beams]
         a = self._beam_dirs[beams]
         # End points in the body frame (mount offset included), then to world per particle,
         # in blocks so that the temporaries stay small when scoring many candidates.
         bx = self.spec.mount_x_m + r * np.cos(a)
         by = self.spec.mount_y_m + r * np.sin(a)
-        out = np.empty(len(particles))
-        for lo in range(0, len(particles), SCORE_BLOCK):
+        mean_log, mean_p = np.empty(m), np.empty(m)
+        for lo in range(0, m, SCORE_BLOCK):
             p = particles[lo : lo + SCORE_BLOCK]
             c, s = np.cos(p[:, 2:3]), np.sin(p[:, 2:3])
             wx = p[:, 0:1] + c * bx - s * by
             wy = p[:, 1:2] + s * bx + c * by
-            out[lo : lo + SCORE_BLOCK] = self.field.log_likelihood_xy(wx, wy).mean(axis=1)
-        return out
+            ll = self.field.log_likelihood_xy(wx, wy)
+            mean_log[lo : lo + SCORE_BLOCK] = ll.mean(axis=1)
+            mean_p[lo : lo + SCORE_BLOCK] = np.exp(ll).mean(axis=1)
+        return mean_log, mean_p
 
-    def update(self, ranges: np.ndarray) -> dict:
+    def update(self, ranges: np.ndarray, ignore: np.ndarray | None = None) -> dict:
         """Weigh particles by a scan ``(B,)`` (ranges as from :func:`~.lidar.scan`), then
         resample if the effective sample size is low or random particles are due.
 
+        ``ignore`` ``(B,)`` bool marks beams not to score (returns from other skids, whose
+        positions the fleet knows and the map does not).
+
         Returns a dict of diagnostics: ``n_particles``, ``n_eff``, ``p_inject``,
-        ``resampled``, ``beams``.
+        ``resampled``, ``beams``, ``tempering``.
         """
         cfg = self.config
+        if ignore is not None:
+            ranges = np.where(np.asarray(ignore, dtype=bool), np.nan, ranges)
         beams = self._beam_subset(ranges)
         k = len(beams)
         diag = {"beams": k, "p_inject": 0.0, "resampled": False, "tempering": 1.0}
@@ -502,13 +526,17 @@ class ParticleFilter:
             self.log_w = np.full(cfg.global_candidates, -np.log(cfg.global_candidates))
         if k > 0:
             self._global_pending = False
-        per_beam = self.scan_log_likelihood(self.particles, ranges)
+        per_beam, mean_p = self._score(self.particles, ranges)
         if k == 0:
             diag.update(n_particles=len(self.particles), n_eff=self.n_eff)
             return diag
         w_prev = self.weights
-        # Augmented MCL on the per-beam (geometric-mean) likelihood, which is scale-free.
-        w_avg = float(np.sum(w_prev * np.exp(per_beam)))
+        # Augmented MCL watches the mean *per-beam* likelihood (arithmetic, not the product):
+        # it does not grow with the number of beams, and a neighbour hiding a third of the
+        # walls lowers it by about a third, not by orders of magnitude as the product would --
+        # so occlusion does not look like a kidnapping, while a real kidnapping (almost no
+        # beam fits) still does.
+        w_avg = float(np.sum(w_prev * mean_p))
         if self.updates == 0 or self.w_slow == 0.0:
             self.w_slow = self.w_fast = w_avg
         else:
@@ -519,7 +547,8 @@ class ParticleFilter:
         diag["tempering"] = beta
         self.log_w = self.log_w + beta * cfg.likelihood_power * k * per_beam
         self.log_w -= logsumexp(self.log_w)
-        p_inject = max(0.0, 1.0 - self.w_fast / self.w_slow) if cfg.alpha_fast > 0 else 0.0
+        ratio = self.w_fast / self.w_slow
+        p_inject = max(0.0, 1.0 - ratio / cfg.recovery_ratio) if cfg.alpha_fast > 0 else 0.0
         diag["p_inject"] = p_inject
         neff = self.n_eff
         if neff < cfg.resample_neff_ratio * len(self.particles) or p_inject > 0:
@@ -694,3 +723,178 @@ class OdometryDrift:
     def kidnap(self, true_now: np.ndarray) -> None:
         """Move robots to new true poses ``(n, 3)`` without the odometry noticing (carried)."""
         self.true_prev = np.asarray(true_now, dtype=float).reshape(self.odom.shape).copy()
+
+
+class FleetLocalizer:
+    """AMCL for every skid of a fleet, fed with simulated drifting odometry.
+
+    One call per simulation step turns the skids' true poses and their scans into pose
+    estimates: the odometry model drifts from the true motion, each skid's filter predicts
+    with its odometry increment and, once it has moved far enough (amcl's ``update_min_d`` /
+    ``update_min_a``), weighs its particles by its scan.
+
+    Parameters
+    ----------
+    field
+        The shared map's :class:`LikelihoodField`.
+    spec
+        The scanner (the same on every skid).
+    start_poses
+        ``(N, 3)`` true start poses (the odometry starts there).
+    rng
+        Generator; every skid's filter and the odometry get their own child stream.
+    config
+        Filter settings for all skids.
+    initial_std
+        Spread of the initial particle clouds around ``start_poses``; ``None`` starts every
+        filter uniform over free space (global localization).
+    odometry
+        Drift model; ``None`` builds the default :class:`OdometryDrift`.
+    footprint, other_skid_margin_m
+        With a footprint, beams that run into another skid's footprint at its current estimate
+        (grown by the margin) are not scored: a neighbour a metre away hides a large part of
+        the walls, and its outline in the scan fits no map, which otherwise makes the filter
+        inject particles and jump to a wrong pose that happens to fit the occluded scan.
+    update_min_d_m, update_min_a_rad
+        A skid's scan is used only after it moved this far or turned this much since its last
+        sensor update (0 = every step).
+
+    Examples
+    --------
+    >>> from swarmpark.gridmap import OccupancyGrid
+    >>> from swarmpark.sense.lidar import scan
+    >>> g = OccupancyGrid(np.zeros((60, 80), bool), 0.1)
+    >>> spec = LidarSpec(num_beams=360)
+    >>> start = np.array([[2.0, 3.0, 0.0], [6.0, 3.0, np.pi]])
+    >>> loc = FleetLocalizer(LikelihoodField(g), spec, start, rng=np.random.default_rng(0))
+    >>> est = loc.step(start, scan(spec, start, g))
+    >>> bool(np.all(loc.errors(start)[0] < 0.1))
+    True
+    """
+
+    def __init__(
+        self,
+        field: LikelihoodField,
+        spec: LidarSpec,
+        start_poses: np.ndarray,
+        *,
+        rng: np.random.Generator,
+        config: FilterConfig | None = None,
+        initial_std: tuple[float, float, float] | None = (0.05, 0.05, np.radians(2.0)),
+        odometry: OdometryDrift | None = None,
+        update_min_d_m: float = 0.0,
+        update_min_a_rad: float = 0.0,
+        footprint: Footprint | None = None,
+        other_skid_margin_m: float = 0.25,
+    ) -> None:
+        start = np.asarray(start_poses, dtype=float).reshape(-1, 3)
+        n = len(start)
+        self.spec = spec
+        self._grown_body = None
+        if footprint is not None:
+            grown = Footprint(
+                length_m=footprint.length_m + 2 * other_skid_margin_m,
+                width_m=footprint.width_m + 2 * other_skid_margin_m,
+                pivot_from_rear_m=footprint.pivot + other_skid_margin_m,
+            )
+            self._grown_body = grown.corners_body()
+        streams = rng.spawn(n + 1)
+        self.odometry = odometry if odometry is not None else OdometryDrift(start, rng=streams[n])
+        if self.odometry.odom.shape != start.shape:
+            raise ValueError(
+                f"fleet: odometry is for {len(self.odometry.odom)} skids, start_poses for {n}"
+            )
+        self.filters = [
+            ParticleFilter(
+                field,
+                spec,
+                config=config,
+                rng=streams[i],
+                initial_pose=None if initial_std is None else start[i],
+                initial_std=initial_std if initial_std is not None else (0.0, 0.0, 0.0),
+            )
+            for i in range(n)
+        ]
+        self.update_min_d_m = float(update_min_d_m)
+        self.update_min_a_rad = float(update_min_a_rad)
+        self._odom_prev = self.odometry.odom.copy()
+        self._odom_at_update = np.full_like(start, np.nan)  # nan: update at the first scan
+        self.estimates = start.copy() if initial_std is not None else np.full_like(start, np.nan)
+        self.covariances = np.zeros((n, 3, 3))
+
+    def step(self, true_poses: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+        """Advance all skids to ``true_poses`` ``(N, 3)`` with their scans ``(N, B)`` taken
+        there; returns the pose estimates ``(N, 3)`` (also kept in :attr:`estimates`)."""
+        odom = self.odometry.step(true_poses)
+        ranges = np.asarray(ranges, dtype=float).reshape(len(self.filters), -1)
+        ignore = self.other_skid_beams(ranges)
+        for i, pf in enumerate(self.filters):
+            pf.predict(self._odom_prev[i], odom[i])
+            last = self._odom_at_update[i]
+            moved = np.isnan(last[0]) or (
+                np.hypot(*(odom[i, :2] - last[:2])) >= self.update_min_d_m
+                or abs(wrap_angle(odom[i, 2] - last[2])) >= self.update_min_a_rad
+            )
+            if moved:
+                pf.update(ranges[i], None if ignore is None else ignore[i])
+                self._odom_at_update[i] = odom[i]
+            est = pf.estimate()
+            self.estimates[i] = est.pose
+            self.covariances[i] = est.cov
+        self._odom_prev = odom
+        return self.estimates.copy()
+
+    def other_skid_beams(self, ranges: np.ndarray) -> np.ndarray | None:
+        """``(N, B)`` beams of each skid that reach another skid's grown footprint, placed at
+        the current estimates (``None`` without a footprint or before the first estimate)."""
+        if self._grown_body is None or len(self.filters) < 2:
+            return None
+        est = self.estimates
+        if not np.all(np.isfinite(est)):
+            return None
+        n = len(est)
+        polys = footprint_corners(est, np.broadcast_to(self._grown_body, (n, 4, 2)))
+        exact = replace(self.spec, range_noise_std_m=0.0, dropout_prob=0.0)
+        reach = scan(exact, est, None, polygons=polys, polygon_owner=np.arange(n))
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(reach) & ~(ranges < reach)
+
+    def kidnap(self, true_poses: np.ndarray) -> None:
+        """The skids were carried to ``true_poses`` ``(N, 3)``; the odometry does not notice
+        (pass the current true pose for skids that were not moved)."""
+        self.odometry.kidnap(true_poses)
+
+    def errors(self, true_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position (m) and absolute yaw (rad) errors ``(N,)`` of the current estimates."""
+        t = np.asarray(true_poses, dtype=float).reshape(self.estimates.shape)
+        pos = np.hypot(self.estimates[:, 0] - t[:, 0], self.estimates[:, 1] - t[:, 1])
+        return pos, np.abs(wrap_angle(self.estimates[:, 2] - t[:, 2]))
+
+
+def pose_error_summary(estimates: np.ndarray, truth: np.ndarray) -> dict[str, float]:
+    """Localization error over a run: ``estimates`` and ``truth`` ``(T, N, 3)`` (or
+    ``(T, 3)``) give ``mean_m``, ``p95_m``, ``max_m`` of the position error and ``mean_yaw_rad``,
+    ``max_yaw_rad`` (the run-result figures of issue 6).
+
+    Examples
+    --------
+    >>> truth = np.zeros((2, 3))
+    >>> est = np.array([[0.03, 0.04, 0.1], [0.0, 0.0, -0.2]])
+    >>> {k: round(v, 3) for k, v in pose_error_summary(est, truth).items()}
+    {'mean_m': 0.025, 'p95_m': 0.048, 'max_m': 0.05, 'mean_yaw_rad': 0.15, 'max_yaw_rad': 0.2}
+    """
+    e = np.asarray(estimates, dtype=float)
+    t = np.asarray(truth, dtype=float)
+    if e.shape != t.shape or e.shape[-1] != 3:
+        raise ValueError(
+            f"pose_error_summary: estimates {e.shape} and truth {t.shape} must both be (..., 3)"
+        )
+    pos = np.hypot(e[..., 0] - t[..., 0], e[..., 1] - t[..., 1]).ravel()
+    yaw = np.abs(wrap_angle(e[..., 2] - t[..., 2])).ravel()
+    return {
+        "mean_m": float(pos.mean()),
+        "p95_m": float(np.percentile(pos, 95)),
+        "max_m": float(pos.max()),
+        "mean_yaw_rad": float(yaw.mean()),
+        "max_yaw_rad": float(yaw.max()),
+    }
