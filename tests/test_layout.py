@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 import shapely
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, reject, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon, box
 
@@ -251,17 +251,19 @@ def star_polygons(draw):
             st.lists(st.floats(0, 2 * np.pi, exclude_max=True), min_size=k, max_size=k, unique=True)
         )
     )
+    # Operators do not draw zero-width spikes: keep vertices at least ~3 degrees apart.
+    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
+    if gaps.min() < 0.05:
+        reject()
     radii = draw(st.lists(st.floats(2.0, 8.0), min_size=k, max_size=k))
     pts = np.column_stack([radii * np.cos(angles), radii * np.sin(angles)])
     poly = Polygon(pts)
     if not poly.is_valid or poly.area < 1.0:
-        from hypothesis import reject
-
         reject()
     return pts.tolist()
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     boundary=star_polygons(),
     n=st.integers(1, 12),
@@ -353,7 +355,7 @@ def test_potential_energy_terms_by_hand():
     np.testing.assert_allclose(force[0], [-3 / 125, -4 / 125 + 1.0])
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     boundary=star_polygons(),
     n=st.integers(1, 10),
@@ -473,7 +475,7 @@ def test_convex_does_not_fit_error_and_capacity():
     assert "only 12 of 13 skids" in str(info.value) and "'convex'" in str(info.value)
 
 
-@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     boundary=star_polygons(),
     n=st.integers(1, 8),

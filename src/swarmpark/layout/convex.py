@@ -181,8 +181,9 @@ def _strips(part: Polygon, axis: int) -> list[Polygon]:
 DECOMPOSITIONS = ("vertical strips", "horizontal strips", "triangles")
 
 
-def _make_piece(poly: Polygon, edge) -> ConvexPiece | None:
-    """A :class:`ConvexPiece` with cut edges marked (``edge``: the free region's boundary)."""
+def _make_piece(poly: Polygon, edge_band) -> ConvexPiece | None:
+    """A :class:`ConvexPiece` with cut edges marked (``edge_band``: a thin band around the
+    free region's boundary)."""
     pts = np.asarray(poly.simplify(0.0).exterior.coords)
     if _signed_area(pts) < 0:
         pts = pts[::-1]
@@ -193,8 +194,10 @@ def _make_piece(poly: Polygon, edge) -> ConvexPiece | None:
     offsets = np.einsum("ij,ij->i", normals, pts[:-1][keep])
     # An edge is a cut only if no stretch of it lies on the free region's edge: the rows are
     # whole lines, so a line that is partly wall must keep the full distance.
+    # Tested with a 0.1 um tolerance band: pieces' vertices are computed, not exact. Errors
+    # go the safe way (a cut taken for a wall keeps the full distance).
     segs = shapely.linestrings(np.stack([pts[:-1][keep], pts[1:][keep]], axis=1))
-    on_edge = shapely.length(shapely.intersection(segs, edge)) > 1e-9
+    on_edge = shapely.length(shapely.intersection(segs, edge_band)) > 1e-6
     weights = np.where(on_edge, 1.0, CUT_WEIGHT)
     piece = ConvexPiece(Polygon(pts), normals, offsets, weights)
     return piece if _inradius(piece) > MIN_PIECE_INRADIUS_M else None
@@ -209,7 +212,8 @@ def convex_pieces(free, score=None) -> tuple[list[ConvexPiece], str]:
     """
     if shapely.get_coordinates(free.boundary).shape[0] > SIMPLIFY_ABOVE_VERTICES:
         free = free.buffer(-SIMPLIFY_TOL_M, join_style="mitre").simplify(SIMPLIFY_TOL_M)
-    edge = free.boundary
+    edge = free.boundary.buffer(1e-7)
+    shapely.prepare(edge)
     parts = [p for p in shapely.get_parts(free) if not p.is_empty and p.area > 0]
     if all(_is_convex(p) for p in parts):
         pieces = [_make_piece(p, edge) for p in parts]

@@ -45,6 +45,8 @@ MARGIN_TOL_M = 1e-6
 #: Containment tests shrink rectangles by this much (metres) so an exact fit (a skid exactly
 #: ``margin`` from an edge) survives float round-off; far inside :data:`MARGIN_TOL_M`.
 FIT_TOL_M = 1e-9
+#: Grid (metres) the free region is snapped to (see :func:`make_region`).
+GRID_SIZE_M = 1e-9
 #: Thickness (metres) given to line or point obstacles (a wall drawn as a line) so that
 #: subtracting them cuts the region.
 _LINE_OBSTACLE_THICKNESS_M = 1e-3
@@ -226,6 +228,9 @@ def make_region(boundary, obstacles, heading: float, margin_m: float) -> Region:
     if holes:
         obst = shapely.union_all([obst, *holes])
     free_w = shell.difference(obst) if not obst.is_empty else shell
+    # Snap to a nanometre grid: removes zero-width spikes and cracks (a ring that folds back
+    # on itself) that shapely accepts as valid but that no skid can use or respect.
+    free_w = shapely.set_precision(free_w, GRID_SIZE_M)
     obst_w = obst.intersection(shell) if not obst.is_empty else obst
     if free_w.is_empty or free_w.area <= 0:
         raise LayoutError("park.boundary: obstacles cover the whole boundary", fits=0)
