@@ -298,11 +298,6 @@ def test_new_goal_while_moving_replaces_the_old_one(app, client):
     assert states_by_id(client)["s1"] == "moving"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="core bug: Supervisor._reassign builds the footprint-fit matrix robots x robots, "
-    "so after a skid leaves a park group (goto) the next tick fails with a shape mismatch",
-)
 def test_new_goal_for_a_skid_of_a_park_group(app, client):
     client.post("/api/park", json={"robots": ROBOTS, "boundary": BOX})
     step(client, 10)

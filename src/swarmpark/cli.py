@@ -188,6 +188,11 @@ def build_parser() -> argparse.ArgumentParser:
     f.set_defaults(func=cmd_formation)
 
     sub.add_parser(
+        "serve",
+        help="serve the operator interface in the browser (see 'swarmpark serve -h')",
+        add_help=False,
+    )
+    sub.add_parser(
         "layout",
         help="lay out parking goals in a boundary (see 'swarmpark layout -h')",
         add_help=False,
@@ -201,6 +206,10 @@ def main(argv: list[str] | None = None) -> int:
         from .cli_layout import layout_command
 
         return layout_command(argv[1:])
+    if argv and argv[0] == "serve":
+        from .server.cli import serve_command
+
+        return serve_command(argv[1:])
     args = build_parser().parse_args(argv)
     return args.func(args)
 

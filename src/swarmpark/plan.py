@@ -17,6 +17,7 @@ from skimage.graph import MCP_Geometric
 from .gridmap import OccupancyGrid
 
 __all__ = [
+    "paths_from",
     "Costmap",
     "build_costmap",
     "plan_path",
@@ -109,6 +110,30 @@ def plan_path(costmap: Costmap, start_xy, goal_xy, *, free_radius_m: float | Non
     pts = grid.cell_to_world(cells)
     pts[0], pts[-1] = start_xy, goal_xy
     return shortcut(pts, cost, grid)
+
+
+def paths_from(costmap: Costmap, start_xy, goals_xy) -> list[np.ndarray | None]:
+    """Least-cost paths from one start to many goals with a single Dijkstra run."""
+    grid = costmap.grid
+    start_xy = np.asarray(start_xy, float)
+    goals_xy = np.asarray(goals_xy, float).reshape(-1, 2)
+    cost = _free_disc(costmap.cost, grid, start_xy, costmap.inscribed_m)
+    for g in goals_xy:
+        cost = _free_disc(cost, grid, g, costmap.inscribed_m)
+    s = grid.world_to_cell(start_xy[None])[0]
+    if not grid.in_bounds(s[None])[0] or not np.isfinite(cost[tuple(s)]):
+        return [None] * len(goals_xy)
+    mcp = MCP_Geometric(cost, fully_connected=True)
+    cum, _ = mcp.find_costs([tuple(s)])
+    out: list[np.ndarray | None] = []
+    for g_xy, g in zip(goals_xy, grid.world_to_cell(goals_xy), strict=True):
+        if not grid.in_bounds(g[None])[0] or not np.isfinite(cum[tuple(g)]):
+            out.append(None)
+            continue
+        pts = grid.cell_to_world(np.asarray(mcp.traceback(tuple(g))))
+        pts[0], pts[-1] = start_xy, g_xy
+        out.append(pts)
+    return out
 
 
 def shortcut(path: np.ndarray, cost: np.ndarray, grid: OccupancyGrid) -> np.ndarray:

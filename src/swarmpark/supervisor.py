@@ -13,7 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from shapely.geometry import LineString, Point, Polygon
+import shapely
+from shapely.geometry import Point, Polygon
 from shapely.ops import nearest_points, unary_union
 
 from . import assign as assign_mod
@@ -26,6 +27,9 @@ from .sim import Simulator
 __all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
 
 ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
+#: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
+BLOCKING_RESOLUTION_M = 0.1
+BLOCKING_CROP_M = 3.0
 #: A formation group keeps tracking its plan this long after the plan ends, then the
 #: navigation stack docks each skid exactly.
 FORMATION_GRACE_S = 3.0
@@ -63,7 +67,9 @@ class ParkGroup:
     boundary: Polygon
     method: str
     report: dict
-    #: blocks[k]: goals whose access corridor from the opening crosses goal k.
+    #: (length, width) of the footprint each goal was laid out for.
+    goal_dims: tuple[tuple[float, float], ...] = ()
+    #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
     blocks: tuple[tuple[int, ...], ...] = ()
     switches: int = 0
 
@@ -96,6 +102,9 @@ class Supervisor:
         self.formations: list = []
         self.outcomes: list[Outcome] = []
         self.metrics = MetricsRecorder(self.ids, self.sim.poses.copy())
+        # What the skids know of the world for planning: the map plus the static obstacles
+        # (ground truth until onboard sensing feeds detections into the costmap).
+        self.known_grid = world.grid.with_polygons(list(world.static_obstacles))
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
         )
@@ -175,6 +184,8 @@ class Supervisor:
         idx = self._robot_indices(cmd.robots, "park.robots")
         if isinstance(idx, str):
             raise ValueError(idx)
+        if len(set(cmd.robots)) != len(cmd.robots):
+            raise ValueError(f"park.robots: robot listed twice in {list(cmd.robots)}")
         boundary = as_simple_polygon(cmd.boundary, "park.boundary")
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.world.robots[i].footprint for i in idx]
@@ -232,6 +243,8 @@ class Supervisor:
             boundary,
             lay.method,
             dict(lay.report),
+            goal_dims=tuple((f.length_m, f.width_m) for f in fps),
+            blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
         )
         self.groups.append(group)
         self._set_goals(idx, goals[goal_of])
@@ -250,34 +263,64 @@ class Supervisor:
             goals=np.round(goals[goal_of], 4).tolist(),
         )
 
-    def _blockers(self, goals: np.ndarray, fps, opening) -> tuple[tuple[int, ...], ...]:
-        """For each goal k, the goals j whose straight access corridor (from the opening, one
-        skid wide) crosses goal k's footprint: k must stay free until those are filled."""
-        from .geometry import footprint_polygon, pivot_to_center
+    def _blockers(
+        self, goals: np.ndarray, fps, boundary: Polygon, fill_order
+    ) -> tuple[tuple[int, ...], ...]:
+        """For each goal k, the goals j filled before k (in the layout's fill order) that can
+        be reached from outside the boundary with the goals before j occupied, but not once
+        k is occupied as well: k must stay free until those are filled.
 
-        if opening is None or len(goals) < 2:
+        Reachability is connectivity of the free space for a disc one skid wide, on a coarse
+        grid cropped around the boundary (scipy.ndimage.label), seeded outside the boundary.
+        """
+        from scipy import ndimage
+
+        from .geometry import footprint_polygon
+
+        n = len(goals)
+        if n < 2:
             return tuple(() for _ in goals)
-        polys = [footprint_polygon(g, f) for g, f in zip(goals, fps, strict=True)]
-        centers = pivot_to_center(goals, np.array([f.center_offset_m for f in fps]))
         half = max(f.width_m for f in fps) / 2
-        corridors = [LineString([tuple(opening), tuple(c)]).buffer(half) for c in centers]
-        out = []
-        for k, pk in enumerate(polys):
-            inner = pk.buffer(-1e-6)
-            out.append(
-                tuple(
-                    j
-                    for j, cj in enumerate(corridors)
-                    if j != k
-                    and cj.intersects(inner)
-                    and not polys[j].buffer(-1e-6).intersects(corridors[k])
-                )
-            )
-        return tuple(out)
+        grid = self.known_grid
+        res = max(grid.resolution_m, BLOCKING_RESOLUTION_M)
+        xmin, ymin, xmax, ymax = boundary.buffer(BLOCKING_CROP_M).bounds
+        gx0, gy0, gx1, gy1 = grid.bounds
+        xmin, ymin, xmax, ymax = max(xmin, gx0), max(ymin, gy0), min(xmax, gx1), min(ymax, gy1)
+        xs = np.arange(xmin + res / 2, xmax, res)
+        ys = np.arange(ymin + res / 2, ymax, res)
+        X, Y = np.meshgrid(xs, ys)
+        pts = np.column_stack([X.ravel(), Y.ravel()])
+        occ = grid.is_occupied(pts).reshape(X.shape)
+        free = ndimage.distance_transform_edt(~occ) * res > half
+        polys = [footprint_polygon(g, f) for g, f in zip(goals, fps, strict=True)]
+        masks = [shapely.contains_xy(poly.buffer(half - 1e-6), X, Y) for poly in polys]
+        seeds = ~shapely.contains_xy(boundary.buffer(res), X, Y) & free
+        centers = np.array([list(p.centroid.coords)[0] for p in polys])
+        cj = np.clip(((centers[:, 1] - ymin) / res).astype(int), 0, len(ys) - 1)
+        ci = np.clip(((centers[:, 0] - xmin) / res).astype(int), 0, len(xs) - 1)
+        rank = {g: r for r, g in enumerate(fill_order)}
+        order = sorted(range(n), key=lambda g: rank.get(g, n))
+
+        def reachable(space: np.ndarray, j: int) -> bool:
+            labels, _ = ndimage.label(space, structure=np.ones((3, 3)))
+            lab = labels[cj[j], ci[j]]
+            return bool(lab) and bool(np.any(labels[seeds & space] == lab))
+
+        blocks: list[set[int]] = [set() for _ in range(n)]
+        occupied = np.zeros(X.shape, dtype=bool)
+        for pos, j in enumerate(order):
+            base = free & ~occupied
+            if reachable(base, j):
+                for k in order[pos + 1 :]:
+                    if not reachable(base & ~masks[k], j):
+                        blocks[k].add(j)
+            occupied |= masks[j]
+        return tuple(tuple(sorted(b)) for b in blocks)
 
     def held(self) -> np.ndarray:
         """Robots that must wait outside their boundary: their goal would block a deeper goal
-        that is not filled yet (deepest goals first, 2018 Fig. 6)."""
+        that is not filled yet and whose skid is not ahead of them (deepest goals first, 2018
+        Fig. 6). A skid may follow the one bound deeper; it must not overtake it."""
         hold = np.zeros(self.sim.n, dtype=bool)
         for g in self.groups:
             if not g.blocks or not any(g.blocks):
@@ -286,8 +329,10 @@ class Supervisor:
             parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
             filled = np.zeros(len(g.goals), dtype=bool)
             filled[g.goal_of[parked]] = True
-            for r, k in zip(g.robots, g.goal_of, strict=True):
-                hold[r] = any(not filled[j] for j in g.blocks[k])
+            to_go = np.full(len(g.goals), np.inf)  # distance of each goal's skid to it
+            to_go[g.goal_of] = pos_err
+            for r, k, d in zip(g.robots, g.goal_of, pos_err, strict=True):
+                hold[r] = any(not filled[j] and to_go[j] >= d for j in g.blocks[k])
         return hold
 
     def hold_zones(self) -> list:
@@ -421,10 +466,13 @@ class Supervisor:
         if not (np.isfinite(v) and np.isfinite(omega)):
             return self._refuse("teleop", f"teleop: v and omega must be finite (got {v}, {omega})")
         i = self.index[robot]
+        taking_over = not self.teleop[i]
         self.teleop[i] = True
         self._teleop_cmd[i] = (v, omega)
         self._teleop_t[i] = self.t
-        return self._accept("teleop", robot=robot)
+        if taking_over:  # log the take-over, not every joystick update
+            return self._accept("teleop", robot=robot)
+        return Outcome(True, "teleop", "", self.t)
 
     def release(self, robot: str) -> Outcome:
         if robot not in self.index:
@@ -469,8 +517,7 @@ class Supervisor:
             if g.cost == "sequential" or len(g.robots) < 2:
                 continue
             fps = [self.world.robots[i].footprint for i in g.robots]
-            dims = [(f.length_m, f.width_m) for f in fps]
-            fits = assign_mod.footprint_fits(dims, dims)
+            fits = assign_mod.footprint_fits([(f.length_m, f.width_m) for f in fps], g.goal_dims)
             if g.cost == "path":
                 continue  # path costs are recomputed on replans only (Dijkstra per goal)
             cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
@@ -514,7 +561,7 @@ class Supervisor:
             max_speed=sim.max_speed,
             max_yaw_rate=sim.max_yaw_rate,
             max_accel=sim.max_accel,
-            grid=self.world.grid,
+            grid=self.known_grid,
             people_xy=ppos,
             people_vel=pvel,
             people_radius=sim.person_radius,

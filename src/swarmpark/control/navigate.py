@@ -28,7 +28,7 @@ from ..geometry import (
     transform_points,
     wrap_angle,
 )
-from ..plan import Costmap, build_costmap, plan_path
+from ..plan import Costmap, build_costmap, path_length, paths_from, shortcut
 from .apf import arc_length, attraction, forces_to_command, repulsion
 from .base import ControlView
 
@@ -182,25 +182,27 @@ class Navigator:
         the goal is appended, so the skid arrives aligned. Falls back to a direct path when
         neither staging point can be reached or the skid is already close.
         """
-        from ..plan import path_length
-
         p = self.params
-        direct = plan_path(cm, pose[:2], goal[:2])
+        axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
+        stages = [goal[:2] + side * p.runup_m * axis for side in (-1.0, 1.0)]  # behind, ahead
+        # One Dijkstra run serves the direct path and both staging points.
+        direct, *heads = paths_from(cm, pose[:2], np.vstack([goal[:2], *stages]))
+        if direct is not None:
+            direct = shortcut(direct, cm.cost, cm.grid)
         if direct is None or np.linalg.norm(goal[:2] - pose[:2]) < 2 * p.runup_m:
             return direct
-        axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
         best = None
-        for side in (-1.0, 1.0):  # -1: staging behind the goal (drive in forwards)
-            stage = goal[:2] + side * p.runup_m * axis
+        for stage, head in zip(stages, heads, strict=True):
             # The straight run from the staging point to the goal must be free.
             run = goal[:2][None] + np.linspace(0, 1, 10)[:, None] * (stage - goal[:2])[None]
             rc = cm.grid.world_to_cell(run)
-            if not cm.grid.in_bounds(rc).all() or cm.grid.occupied[rc[:, 0], rc[:, 1]].any():
+            if (
+                head is None
+                or not cm.grid.in_bounds(rc).all()
+                or cm.grid.occupied[rc[:, 0], rc[:, 1]].any()
+            ):
                 continue
-            head = plan_path(cm, pose[:2], stage)
-            if head is None:
-                continue
-            cand = np.vstack([head, goal[:2][None]])
+            cand = np.vstack([shortcut(head, cm.cost, cm.grid), goal[:2][None]])
             if best is None or path_length(cand) < path_length(best):
                 best = cand
         return best if best is not None else direct
