@@ -53,9 +53,9 @@ class LikelihoodField:
 
     The log-likelihood of a scan end point is tabulated on a lattice of half a cell (cell
     corners, edge midpoints and centres) and looked up at the nearest lattice point. Distances
-    are measured to the closed squares of occupied cells and to the map edge, so an end point
-    lying on a wall's face scores as a hit whichever side the wall faces. Unknown cells count
-    as free.
+    are measured to the surfaces of the occupied cells (from either side) and to the map edge,
+    so an end point lying on a wall's face scores as a hit whichever side the wall faces.
+    Unknown cells count as free.
 
     Parameters
     ----------
@@ -105,7 +105,14 @@ class LikelihoodField:
         on_obstacle[[0, -1], :] = True  # the map edge counts as a wall, as for the lidar
         on_obstacle[:, [0, -1]] = True
         self.step_m = 0.5 * self.resolution_m
-        self.distance_m = ndimage.distance_transform_edt(~on_obstacle) * self.step_m
+        # Distance to the obstacles' *surfaces*, from outside and from inside alike: returns
+        # lie on faces, and with a field that is 0 all through a thick wall, end points could
+        # sink into the wall for free -- a skid that sees one wall only (a hangar) would be
+        # pulled toward it by up to the wall's thickness.
+        surface = on_obstacle & ~ndimage.binary_erosion(
+            on_obstacle, structure=np.ones((3, 3), dtype=bool), border_value=1
+        )
+        self.distance_m = ndimage.distance_transform_edt(~surface) * self.step_m
         self.log_p = self._log_p(self.distance_m)
         self.log_p_off_map = float(np.log(self.z_rand / self.max_range_m))
         # Lookup tables with a ring of off-map values: clipping an index then lands on it.
@@ -720,9 +727,11 @@ class OdometryDrift:
         self.true_prev = true_now.copy()
         return self.odom.copy()
 
-    def kidnap(self, true_now: np.ndarray) -> None:
-        """Move robots to new true poses ``(n, 3)`` without the odometry noticing (carried)."""
-        self.true_prev = np.asarray(true_now, dtype=float).reshape(self.odom.shape).copy()
+    def kidnap(self, robots, true_poses: np.ndarray) -> None:
+        """Robots ``robots`` (index or indices) were carried to ``true_poses`` ``(k, 3)``; their
+        odometry does not notice. Call before the next :meth:`step`."""
+        idx = np.atleast_1d(np.asarray(robots, dtype=np.int64))
+        self.true_prev[idx] = np.asarray(true_poses, dtype=float).reshape(len(idx), 3)
 
 
 class FleetLocalizer:
@@ -859,10 +868,10 @@ class FleetLocalizer:
         with np.errstate(invalid="ignore"):
             return np.isfinite(reach) & ~(ranges < reach)
 
-    def kidnap(self, true_poses: np.ndarray) -> None:
-        """The skids were carried to ``true_poses`` ``(N, 3)``; the odometry does not notice
-        (pass the current true pose for skids that were not moved)."""
-        self.odometry.kidnap(true_poses)
+    def kidnap(self, robots, true_poses: np.ndarray) -> None:
+        """Skids ``robots`` (index or indices) were carried to ``true_poses`` ``(k, 3)``; their
+        odometry does not notice (call before the next :meth:`step`)."""
+        self.odometry.kidnap(robots, true_poses)
 
     def errors(self, true_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position (m) and absolute yaw (rad) errors ``(N,)`` of the current estimates."""
