@@ -145,6 +145,22 @@ class OccupancyGrid:
         geom = shapely.union_all(cells)
         return geom if region is None else geom.intersection(region.buffer(self.resolution_m))
 
+    def coarsen(self, factor: int) -> OccupancyGrid:
+        """A grid with ``factor`` x ``factor`` cells merged: occupied if any is (conservative),
+        unknown if all free ones are unknown. Partial blocks at the top and right edges are
+        padded as occupied."""
+        if factor <= 1:
+            return self
+        h, w = self.shape
+        H, W = -(-h // factor), -(-w // factor)
+        occ = np.ones((H * factor, W * factor), dtype=bool)
+        occ[:h, :w] = self.occupied
+        unk = np.ones_like(occ)
+        unk[:h, :w] = self.unknown | self.occupied
+        occ = occ.reshape(H, factor, W, factor).any(axis=(1, 3))
+        unk = unk.reshape(H, factor, W, factor).all(axis=(1, 3)) & ~occ
+        return OccupancyGrid(occ, self.resolution_m * factor, self.origin, unk)
+
     def copy(self) -> OccupancyGrid:
         return OccupancyGrid(
             self.occupied.copy(), self.resolution_m, self.origin, self.unknown.copy()

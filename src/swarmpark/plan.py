@@ -48,9 +48,19 @@ def build_costmap(
     inscribed_m: float,
     circumscribed_m: float,
     extra_occupied: np.ndarray | None = None,
+    *,
+    resolution_m: float | None = None,
 ) -> Costmap:
-    """Inflate ``grid`` (plus ``extra_occupied`` cells, e.g. detected obstacles) for a skid."""
-    occ = grid.occupied if extra_occupied is None else grid.occupied | extra_occupied
+    """Inflate ``grid`` (plus ``extra_occupied`` cells, e.g. detected obstacles) for a skid.
+
+    With ``resolution_m`` coarser than the map, the map is first coarsened conservatively
+    (a coarse cell is occupied if any of its cells is): fewer cells to search.
+    """
+    if extra_occupied is not None:
+        grid = OccupancyGrid(grid.occupied | extra_occupied, grid.resolution_m, grid.origin)
+    if resolution_m is not None and resolution_m > grid.resolution_m * 1.5:
+        grid = grid.coarsen(int(round(resolution_m / grid.resolution_m)))
+    occ = grid.occupied
     # Distance from each cell centre to the nearest occupied cell's edge (the map edge too).
     d = np.maximum(ndimage.distance_transform_edt(np.pad(~occ, 1))[1:-1, 1:-1] - 0.5, 0.0)
     d *= grid.resolution_m
@@ -139,32 +149,48 @@ def paths_from(costmap: Costmap, start_xy, goals_xy) -> list[np.ndarray | None]:
 def shortcut(path: np.ndarray, cost: np.ndarray, grid: OccupancyGrid) -> np.ndarray:
     """Drop waypoints that can be skipped by a straight segment through no costlier cells.
 
-    A segment is allowed if every cell it crosses has the minimum cost (1: outside every
-    inflation band) or no higher cost than the cells of the path it replaces.
+    A segment is allowed if every cell it crosses is passable and no costlier than the worst
+    cell of the path it replaces (or 1, the cost outside every inflation band). From each kept
+    waypoint the farthest allowed one is found by galloping and bisection, so a path of K
+    cells takes O(log K) line-of-sight checks per kept segment.
     """
     if len(path) <= 2:
         return path
+    rc_path = grid.world_to_cell(path)
+    inb = grid.in_bounds(rc_path)
+    along = np.full(len(path), np.inf)
+    along[inb] = cost[rc_path[inb, 0], rc_path[inb, 1]]
+    step_m = grid.resolution_m / 2
+    h, w = cost.shape
+
+    def visible(i: int, j: int) -> bool:
+        a, b = path[i], path[j]
+        n = max(int(np.linalg.norm(b - a) / step_m), 2)
+        t = np.linspace(0.0, 1.0, n)[:, None]
+        xy = a + t * (b - a)
+        col = np.floor((xy[:, 0] - grid.origin[0]) / grid.resolution_m).astype(int)
+        row = np.floor((xy[:, 1] - grid.origin[1]) / grid.resolution_m).astype(int)
+        if row.min() < 0 or col.min() < 0 or row.max() >= h or col.max() >= w:
+            return False
+        seg = cost[row, col]
+        return bool(np.all(np.isfinite(seg)) and seg.max() <= max(along[i : j + 1].max(), 1.0))
+
     out = [path[0]]
-    i = 0
-    step = grid.resolution_m / 2
-    while i < len(path) - 1:
-        j = len(path) - 1
-        while j > i + 1:
-            a, b = path[i], path[j]
-            n = max(int(np.linalg.norm(b - a) / step), 2)
-            samples = a + np.linspace(0, 1, n)[:, None] * (b - a)
-            rc = grid.world_to_cell(samples)
-            ok = grid.in_bounds(rc).all()
-            if ok:
-                seg_cost = cost[rc[:, 0], rc[:, 1]]
-                span = grid.world_to_cell(path[i : j + 1])
-                worst = cost[span[:, 0], span[:, 1]].max()
-                ok = bool(np.all(np.isfinite(seg_cost)) and seg_cost.max() <= max(worst, 1.0))
-            if ok:
-                break
-            j -= 1
-        out.append(path[j])
-        i = j
+    i, last = 0, len(path) - 1
+    while i < last:
+        j, step = i + 1, 1
+        while j + step <= last and visible(i, j + step):
+            j += step
+            step *= 2
+        lo, hi = j, min(j + step, last + 1)
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if visible(i, mid):
+                lo = mid
+            else:
+                hi = mid
+        out.append(path[lo])
+        i = lo
     return np.asarray(out)
 
 

@@ -54,6 +54,8 @@ class NavParams:
     #: Near its goal a skid ignores obstacles farther than this (parked neighbours sit there).
     influence_at_goal_m: float = 0.15
     replan_period_s: float = 3.0
+    #: Paths are searched on the map coarsened to this resolution (conservatively).
+    plan_resolution_m: float = 0.1
     #: Collision monitor: look this far ahead in time, at these fractions of the command.
     monitor_horizon_s: float = 1.0
     monitor_samples: int = 5
@@ -135,7 +137,9 @@ class Navigator:
     def _costmap(self, view: ControlView, fp: Footprint) -> Costmap:
         key = (round(fp.width_m / 2, 4), round(fp.reach_m, 4))
         if key not in self._costmaps:
-            self._costmaps[key] = build_costmap(view.grid, key[0], key[1])
+            self._costmaps[key] = build_costmap(
+                view.grid, key[0], key[1], resolution_m=self.params.plan_resolution_m
+            )
         return self._costmaps[key]
 
     def _static_points(self, view: ControlView) -> np.ndarray:

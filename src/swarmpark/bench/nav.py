@@ -1,0 +1,96 @@
+"""Navigation benchmarks: assignment, one grid plan, one control tick, scenario quality."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import register, time_call
+
+
+@register("nav.assign", "Hungarian assignment (formation cost)", target="< 100 ms at N = 1000")
+def bench_assign(quick: bool) -> list[dict]:
+    from ..assign import assign, cost_matrix
+
+    rows = []
+    rng = np.random.default_rng(0)
+    for n in (100, 1000) if quick else (100, 500, 1000):
+        robots = rng.uniform(0, 100, (n, 2))
+        goals = rng.uniform(0, 100, (n, 2))
+        stats = time_call(
+            lambda r=robots, g=goals: assign(cost_matrix(r, g, "formation")),
+            repeat=3 if quick else 10,
+        )
+        rows.append(
+            {"N": n, **stats, "meets_target": stats["median_ms"] < 100 if n == 1000 else None}
+        )
+    return rows
+
+
+@register("nav.plan", "one path on a 400 x 400 grid (20 x 20 m at 5 cm)", target="< 50 ms")
+def bench_plan(quick: bool) -> list[dict]:
+    from shapely.geometry import box
+
+    from ..gridmap import grid_from_walls
+    from ..plan import build_costmap, plan_path
+
+    walls = [box(5, 0, 5.5, 14), box(10, 6, 10.5, 20), box(15, 0, 15.5, 14)]
+    grid = grid_from_walls((20, 20), 0.05, walls)
+    start, goal = np.array([1.0, 1.0]), np.array([19.0, 19.0])
+    rows = []
+    for label, res in (("5 cm (native)", None), ("10 cm (navigator)", 0.1)):
+        cm = build_costmap(grid, 0.4, 0.72, resolution_m=res)
+        stats = time_call(lambda cm=cm: plan_path(cm, start, goal), repeat=3 if quick else 20)
+        path = plan_path(cm, start, goal)
+        length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+        rows.append(
+            {
+                "map": "400x400",
+                "search": label,
+                **stats,
+                "path_m": round(length, 2),
+                "meets_target": stats["median_ms"] < 50,
+            }
+        )
+    return rows
+
+
+@register(
+    "nav.tick",
+    "one control tick (assign + plan/follow + field + monitor)",
+    target="< 20 ms for 50 skids",
+)
+def bench_tick(quick: bool) -> list[dict]:
+    from ..scenario import build_world, parse_scenario
+    from ..supervisor import Supervisor
+
+    rows = []
+    for n in (10, 50):
+        robots = [
+            {"id": f"s{k}", "pose": [3.0 + 2.5 * (k // 10), 2.0 + 1.6 * (k % 10), 0.0]}
+            for k in range(n)
+        ]
+        cols = int(np.ceil(n / 8))
+        boundary = [[22, 2], [22 + 1.6 * cols + 1, 2], [22 + 1.6 * cols + 1, 18.5], [22, 18.5]]
+        data = {
+            "name": f"tick-{n}",
+            "duration_s": 60,
+            "map": {"size_m": [40, 20], "resolution_m": 0.05},
+            "robots": robots,
+            "commands": [
+                {
+                    "at_s": 0,
+                    "park": {
+                        "robots": [r["id"] for r in robots],
+                        "boundary": boundary,
+                        "margin_m": 0.3,
+                    },
+                }
+            ],
+        }
+        sup = Supervisor(build_world(parse_scenario(data)))
+        sup.tick()  # the park command: layout, assignment, first plans
+        for _ in range(20):
+            sup.tick()
+        stats = time_call(sup.tick, repeat=20 if quick else 100, warmup=0)
+        rows.append({"N": n, **stats, "meets_target": stats["median_ms"] < 20 if n == 50 else None})
+    return rows
