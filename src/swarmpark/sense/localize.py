@@ -14,13 +14,14 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import shapely
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
 
-from swarmpark.geometry import Footprint, footprint_corners, wrap_angle
+from swarmpark.geometry import Footprint, footprint_corners, pad_polygons, wrap_angle
 from swarmpark.gridmap import OccupancyGrid
 from swarmpark.sense.lidar import LidarSpec, beam_angles, scan
 
@@ -201,7 +202,7 @@ class FilterConfig:
         :meth:`ParticleFilter.init_global`).
     injection_candidates
         Injected particles are drawn from this many uniform candidates, weighted by the current
-        scan (0 = plain uniform injection as in amcl).
+        scan (0 = plain uniform injection as in amcl, without the ``recovery_margin`` test).
     alpha_slow, alpha_fast
         Smoothing rates of the long- and short-term average likelihood (augmented MCL); random
         particles are injected with probability ``max(0, 1 - w_fast / w_slow)``. Set
@@ -213,6 +214,13 @@ class FilterConfig:
         dips of the fit that occlusion causes (a skid or a person in front of the scanner
         lowers it by 10-15 %), while a kidnapping (a drop of a third and more) still triggers
         recovery.
+    recovery_min_beams
+        No injection from a scan with fewer scored beams than this (too little of the map in
+        view to tell a kidnapping from a scan hidden by unmapped obstacles).
+    recovery_margin
+        With ``injection_candidates``: particles are injected only if some candidate explains
+        the scan at least this much better (relative mean beam likelihood) than the belief,
+        and about as well as scans were explained before (``recovery_ratio * w_slow``).
     """
 
     min_particles: int = 200
@@ -235,6 +243,8 @@ class FilterConfig:
     alpha_slow: float = 0.02
     alpha_fast: float = 0.2
     recovery_ratio: float = 0.8
+    recovery_min_beams: int = 30
+    recovery_margin: float = 0.5
 
     def __post_init__(self) -> None:
         if not (1 <= self.min_particles <= self.max_particles):
@@ -265,6 +275,11 @@ class FilterConfig:
             raise ValueError(f"filter.min_neff_ratio must be in [0, 1) (got {self.min_neff_ratio})")
         if not 0 < self.recovery_ratio <= 1:
             raise ValueError(f"filter.recovery_ratio must be in (0, 1] (got {self.recovery_ratio})")
+        if self.recovery_min_beams < 0 or self.recovery_margin < 0:
+            raise ValueError(
+                "filter.recovery_min_beams and recovery_margin must be >= 0 "
+                f"(got {self.recovery_min_beams}, {self.recovery_margin})"
+            )
         if not self.likelihood_power > 0:
             raise ValueError(f"filter.likelihood_power must be > 0 (got {self.likelihood_power})")
 
@@ -556,10 +571,24 @@ class ParticleFilter:
         self.log_w -= logsumexp(self.log_w)
         ratio = self.w_fast / self.w_slow
         p_inject = max(0.0, 1.0 - ratio / cfg.recovery_ratio) if cfg.alpha_fast > 0 else 0.0
+        pool = None
+        if p_inject > 0 and k < cfg.recovery_min_beams:
+            p_inject = 0.0  # too little of the map in view to tell a kidnapping
+        elif p_inject > 0 and cfg.injection_candidates > 0:
+            # Only inject where the map explains the scan clearly better than the belief does,
+            # and about as well as scans were explained before: a scan spoilt by obstacles the
+            # map lacks fits nowhere well, a kidnapped skid's scan fits where it now is.
+            pool = self._recovery_pool(ranges)
+            best = float(np.max(pool[1]))
+            if not (
+                best > w_avg * (1.0 + cfg.recovery_margin)
+                and best > cfg.recovery_ratio * self.w_slow
+            ):
+                p_inject, pool = 0.0, None
         diag["p_inject"] = p_inject
         neff = self.n_eff
         if neff < cfg.resample_neff_ratio * len(self.particles) or p_inject > 0:
-            self._resample(p_inject, ranges)
+            self._resample(p_inject, pool)
             diag["resampled"] = True
         diag.update(n_particles=len(self.particles), n_eff=self.n_eff)
         return diag
@@ -572,7 +601,7 @@ class ParticleFilter:
         it = np.floor((particles[:, 2] + np.pi) / (2 * np.pi) * n_yaw).astype(np.int64) % n_yaw
         return np.column_stack([ix, iy, it])
 
-    def _resample(self, p_inject: float, ranges: np.ndarray) -> None:
+    def _resample(self, p_inject: float, pool: tuple | None) -> None:
         cfg = self.config
         w = self.weights
         m_max = cfg.max_particles if cfg.adaptive else min(len(self.particles), cfg.max_particles)
@@ -582,7 +611,7 @@ class ParticleFilter:
         new = new[self.rng.permutation(m_max)]
         if p_inject > 0:
             swap = self.rng.random(m_max) < p_inject
-            new[swap] = self._injection(int(swap.sum()), ranges)
+            new[swap] = self._injection(int(swap.sum()), pool)
         if cfg.adaptive:
             bins = self._bins(new)
             key = (bins[:, 0] * 1_000_003 + bins[:, 1]) * 1_009 + bins[:, 2]
@@ -597,18 +626,23 @@ class ParticleFilter:
         self.particles = new
         self.log_w = np.full(len(new), -np.log(len(new)))
 
-    def _injection(self, n: int, ranges: np.ndarray) -> np.ndarray:
-        """``n`` random poses for augmented MCL. With ``injection_candidates > n`` they are
-        drawn from that many uniform candidates in proportion to the current scan's (tempered)
-        likelihood -- sensor-resetting localization (Lenser and Veloso 2000) -- so that a
-        kidnapped robot is found in a large map, not only by luck."""
-        n_cand = self.config.injection_candidates
-        if n == 0 or n_cand <= n:
-            return self.field.sample_free(n, self.rng)
-        cand = self.field.sample_free(n_cand, self.rng)
+    def _recovery_pool(self, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``injection_candidates`` uniform poses, their mean beam likelihood under the current
+        scan and their (power-scaled) log-likelihood."""
+        cand = self.field.sample_free(self.config.injection_candidates, self.rng)
+        mean_log, mean_p = self._score(cand, ranges)
         k = len(self._beam_subset(ranges))
-        ll = self.config.likelihood_power * k * self.scan_log_likelihood(cand, ranges)
-        flat = np.full(n_cand, -np.log(n_cand))
+        return cand, mean_p, self.config.likelihood_power * k * mean_log
+
+    def _injection(self, n: int, pool: tuple | None) -> np.ndarray:
+        """``n`` random poses for augmented MCL: drawn from the candidate pool in proportion to
+        the current scan's (tempered) likelihood -- sensor-resetting localization (Lenser and
+        Veloso 2000), so that a kidnapped skid is found in a large map, not only by luck -- or
+        uniform without a pool (``injection_candidates = 0``, as amcl)."""
+        if n == 0 or pool is None:
+            return self.field.sample_free(n, self.rng)
+        cand, _, ll = pool
+        flat = np.full(len(cand), -np.log(len(cand)))
         beta = _temper(flat, ll, self.config.min_neff_ratio)
         lw = beta * ll
         return cand[low_variance_resample(np.exp(lw - lw.max()), n, self.rng)]
@@ -734,6 +768,15 @@ class OdometryDrift:
         self.true_prev[idx] = np.asarray(true_poses, dtype=float).reshape(len(idx), 3)
 
 
+def _grow_convex(polys: np.ndarray, margin_m: float) -> np.ndarray:
+    """Convex polygons ``(P, K, 2)`` grown by ``margin_m`` (mitred corners, via shapely),
+    counter-clockwise and padded to a common vertex count."""
+    geoms = shapely.buffer(shapely.polygons(polys), margin_m, join_style="mitre")
+    rings = [np.asarray(g.exterior.coords)[:-1] for g in geoms]
+    rings = [r if shapely.LinearRing(r).is_ccw else r[::-1] for r in rings]
+    return pad_polygons(rings, max(len(r) for r in rings))
+
+
 class FleetLocalizer:
     """AMCL for every skid of a fleet, fed with simulated drifting odometry.
 
@@ -800,6 +843,7 @@ class FleetLocalizer:
         n = len(start)
         self.spec = spec
         self._grown_body = None
+        self.other_skid_margin_m = float(other_skid_margin_m)
         if footprint is not None:
             grown = Footprint(
                 length_m=footprint.length_m + 2 * other_skid_margin_m,
@@ -831,12 +875,21 @@ class FleetLocalizer:
         self.estimates = start.copy() if initial_std is not None else np.full_like(start, np.nan)
         self.covariances = np.zeros((n, 3, 3))
 
-    def step(self, true_poses: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+    def step(
+        self,
+        true_poses: np.ndarray,
+        ranges: np.ndarray,
+        known_polygons: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Advance all skids to ``true_poses`` ``(N, 3)`` with their scans ``(N, B)`` taken
-        there; returns the pose estimates ``(N, 3)`` (also kept in :attr:`estimates`)."""
+        there; returns the pose estimates ``(N, 3)`` (also kept in :attr:`estimates`).
+
+        ``known_polygons`` ``(P, K, 2)`` are obstacles whose place is known but which the map
+        lacks (skids outside this localizer, pallets placed by the operator); beams that run
+        into them (grown by the margin) are not scored, as for the fleet's own skids."""
         odom = self.odometry.step(true_poses)
         ranges = np.asarray(ranges, dtype=float).reshape(len(self.filters), -1)
-        ignore = self.other_skid_beams(ranges)
+        ignore = self.other_skid_beams(ranges, known_polygons)
         for i, pf in enumerate(self.filters):
             pf.predict(self._odom_prev[i], odom[i])
             last = self._odom_at_update[i]
@@ -853,20 +906,37 @@ class FleetLocalizer:
         self._odom_prev = odom
         return self.estimates.copy()
 
-    def other_skid_beams(self, ranges: np.ndarray) -> np.ndarray | None:
-        """``(N, B)`` beams of each skid that reach another skid's grown footprint, placed at
-        the current estimates (``None`` without a footprint or before the first estimate)."""
-        if self._grown_body is None or len(self.filters) < 2:
-            return None
+    def other_skid_beams(
+        self, ranges: np.ndarray, known_polygons: np.ndarray | None = None
+    ) -> np.ndarray | None:
+        """``(N, B)`` beams of each skid that reach another skid's grown footprint at its
+        current estimate, or one of ``known_polygons`` (``None`` if there is nothing to mask
+        or no estimate yet)."""
         est = self.estimates
+        n = len(est)
         if not np.all(np.isfinite(est)):
             return None
-        n = len(est)
-        polys = footprint_corners(est, np.broadcast_to(self._grown_body, (n, 4, 2)))
+        polys, owner = [], []
+        if self._grown_body is not None and n > 1:
+            polys.append(footprint_corners(est, np.broadcast_to(self._grown_body, (n, 4, 2))))
+            owner.append(np.arange(n))
+        if known_polygons is not None and len(known_polygons):
+            polys.append(
+                _grow_convex(np.asarray(known_polygons, dtype=float), self.other_skid_margin_m)
+            )
+            owner.append(np.full(len(polys[-1]), -1))
+        if not polys:
+            return None
+        k = max(p.shape[1] for p in polys)
+        polys = [p if p.shape[1] == k else pad_polygons(list(p), k) for p in polys]
         exact = replace(self.spec, range_noise_std_m=0.0, dropout_prob=0.0)
-        reach = scan(exact, est, None, polygons=polys, polygon_owner=np.arange(n))
+        reach = scan(
+            exact, est, None, polygons=np.concatenate(polys), polygon_owner=np.concatenate(owner)
+        )
+        # A return no shorter than where the beam meets the polygon (less the margin: range
+        # noise, and known polygons are not grown) may come from it.
         with np.errstate(invalid="ignore"):
-            return np.isfinite(reach) & ~(ranges < reach)
+            return np.isfinite(reach) & ~(ranges < reach - self.other_skid_margin_m)
 
     def kidnap(self, robots, true_poses: np.ndarray) -> None:
         """Skids ``robots`` (index or indices) were carried to ``true_poses`` ``(k, 3)``; their
