@@ -13,6 +13,7 @@ Planning happens when the goal changes, when the path becomes blocked, and at mo
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -514,6 +515,7 @@ class Navigator:
                     owner.append(np.full(m, j))
             self._outline_pts = np.vstack(pts)
             self._outline_owner = np.concatenate(owner)
+            self._plain = np.stack([f.corners_body() for f in view.footprints])
             self._grown = np.stack(
                 [
                     Footprint(
@@ -592,7 +594,7 @@ class Navigator:
         fps = view.footprints
         grow = p.monitor_margin_m
         body = self._outlines(view)[2][idx]
-        plain = np.stack([fps[i].corners_body() for i in idx])
+        plain = self._plain[idx]
         # A skid already inside its margin of something is judged by its plain footprint, or it
         # could never move away again.
         body = np.where(self._within_margin(view, idx, body)[:, None, None], plain, body)
@@ -626,13 +628,14 @@ class Navigator:
             hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
             bad[qi[hit]] = True
         # Other skids where they are now (they run their own monitor).
-        others = footprint_corners(view.poses, np.stack([f.corners_body() for f in fps]))
+        others = footprint_corners(view.poses, self._plain)
         centers = others.mean(axis=1)
         tree = cKDTree(centers)
         radius = max(f.circumradius_m for f in fps) * 2 + grow
         cand = tree.query_ball_point(corners.mean(axis=1), radius)
-        qa = np.concatenate([np.full(len(c), k) for k, c in enumerate(cand)]).astype(int)
-        qb = np.concatenate([np.asarray(c, dtype=int) for c in cand]).astype(int)
+        lens = np.fromiter(map(len, cand), int, len(cand))
+        qa = np.repeat(np.arange(len(cand)), lens)
+        qb = np.fromiter(itertools.chain.from_iterable(cand), int, int(lens.sum()))
         keep = qb != idx[owner[qa]]
         qa, qb = qa[keep], qb[keep]
         blockers: list[set[int]] = [set() for _ in range(n_act)]
@@ -673,7 +676,7 @@ class Navigator:
             hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
             out[qi[hit]] = True
         others = footprint_corners(
-            view.poses, np.stack([f.corners_body() for f in view.footprints])
+            view.poses, self._plain
         )
         ia, ib = np.meshgrid(np.arange(len(idx)), np.arange(len(view.poses)), indexing="ij")
         ia, ib = ia.ravel(), ib.ravel()
