@@ -80,6 +80,8 @@ def run_world(
         "commands": [o.as_dict() for o in sup.outcomes],
         "assignment_switches": int(sum(g.switches for g in sup.groups)),
     }
+    if sup.localizer is not None:
+        result["localization"] = sup.localization_summary()
     if sup.formations:
         result["formation_error"] = [
             {"robots": [sup.ids[i] for i in f.idx], **f.metrics()} for f in sup.formations

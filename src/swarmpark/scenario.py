@@ -183,6 +183,25 @@ class ExpectSpec(_Model):
     max_time_to_park_s: PositiveFloat | None = None
 
 
+class NavigationSpec(_Model):
+    """Navigation options: ``avoidance`` between skids is ``monitor`` (collision monitor with
+    right of way at bottlenecks, the default) or ``rvo`` (ORCA with priorities)."""
+
+    avoidance: Literal["monitor", "rvo"] = "monitor"
+
+
+class SensingSpec(_Model):
+    """Onboard sensing. ``localization: amcl`` makes every skid localize with its own LIDAR
+    and drifting odometry (particle filter against the map); control then uses the estimates
+    and the run result reports the localization error. ``truth`` uses the true poses."""
+
+    localization: Literal["truth", "amcl"] = "truth"
+    lidar_beams: Annotated[int, Field(ge=8, le=4000)] = 1000
+    lidar_range_m: PositiveFloat = 5.0
+    range_noise_std_m: NonNegFloat = 0.01
+    dropout_prob: Annotated[float, Field(ge=0, lt=1)] = 0.0
+
+
 class Scenario(_Model):
     name: str
     seed: int = 0
@@ -193,6 +212,8 @@ class Scenario(_Model):
     robots: Annotated[list[RobotSpec], Field(min_length=1)]
     obstacles: list[StaticObstacleSpec | PersonSpec] = []
     commands: list[CommandSpec] = []
+    navigation: NavigationSpec = NavigationSpec()
+    sensing: SensingSpec = SensingSpec()
     expect: ExpectSpec = ExpectSpec()
 
 

@@ -27,6 +27,8 @@ from .sim import Simulator
 __all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
 
 ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
+#: Beams of each scan scored by the particle filter (a subsample, as AMCL's max_beams).
+AMCL_BEAMS = 120
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
 BLOCKING_CROP_M = 3.0
@@ -80,11 +82,15 @@ class Supervisor:
     def __init__(
         self, world: World, controller: Controller | None = None, link: Simulator | None = None
     ) -> None:
-        from .control.navigate import Navigator  # the default navigation stack
+        from .control.navigate import Navigator, NavParams  # the default navigation stack
 
         self.world = world
         self.sim = link if link is not None else Simulator(world)
-        self.controller = controller if controller is not None else Navigator()
+        self.controller = (
+            controller
+            if controller is not None
+            else Navigator(NavParams(avoidance=world.scenario.navigation.avoidance))
+        )
         n = self.sim.n
         self.ids = list(world.ids)
         self.index = {rid: i for i, rid in enumerate(self.ids)}
@@ -105,6 +111,11 @@ class Supervisor:
         # What the skids know of the world for planning: the map plus the static obstacles
         # (ground truth until onboard sensing feeds detections into the costmap).
         self.known_grid = world.grid.with_polygons(list(world.static_obstacles))
+        self.localizer = None
+        self.estimates = self.sim.poses.copy()
+        self.loc_errors: list[np.ndarray] = []
+        if world.scenario.sensing.localization == "amcl":
+            self._start_localization()
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
         )
@@ -505,6 +516,67 @@ class Supervisor:
 
     # ------------------------------------------------------------------ the tick
 
+    def _start_localization(self) -> None:
+        """Per-skid AMCL on simulated scans and drifting odometry (2018 paper Sect. 3.5)."""
+        from .geometry import pad_polygons, triangulate
+        from .sense.lidar import LidarSpec, prepare_grid
+        from .sense.localize import FilterConfig, FleetLocalizer, LikelihoodField
+
+        cfg = self.world.scenario.sensing
+        self.lidar_spec = LidarSpec(
+            num_beams=cfg.lidar_beams,
+            max_range_m=cfg.lidar_range_m,
+            range_noise_std_m=cfg.range_noise_std_m,
+            dropout_prob=cfg.dropout_prob,
+        )
+        self._scan_field = prepare_grid(self.world.grid)
+        tris = [t for poly in self.world.static_obstacles for t in triangulate(poly)]
+        self._obstacle_tris = pad_polygons(tris, 4) if tris else np.zeros((0, 4, 2))
+        seed = np.random.SeedSequence(self.world.scenario.seed)
+        scan_seed, loc_seed = seed.spawn(2)
+        self._scan_rng = np.random.default_rng(scan_seed)
+        self.localizer = FleetLocalizer(
+            LikelihoodField(self.world.grid, max_range_m=cfg.lidar_range_m),
+            self.lidar_spec,
+            self.sim.poses.copy(),
+            rng=np.random.default_rng(loc_seed),
+            footprint=self.sim.footprints[0],
+            config=FilterConfig(max_beams=AMCL_BEAMS),
+        )
+        self.estimates = self.localizer.estimates.copy()
+
+    def _sense(self) -> None:
+        """Scan from the true poses (the world as it is) and update every skid's estimate."""
+        from .sense.lidar import scan
+
+        sim = self.sim
+        skids = sim.corners()
+        polys = np.concatenate([skids, self._obstacle_tris])
+        owner = np.concatenate([np.arange(sim.n), np.full(len(self._obstacle_tris), -1)])
+        ranges = scan(
+            self.lidar_spec,
+            sim.poses,
+            self._scan_field,
+            polygons=polys,
+            polygon_owner=owner,
+            discs=sim.person_positions(),
+            disc_radii=sim.person_radius,
+            rng=self._scan_rng,
+        )
+        self.estimates = self.localizer.step(sim.poses, ranges).copy()
+        self.loc_errors.append(self.localizer.errors(sim.poses)[0])
+
+    def localization_summary(self) -> dict:
+        if not self.loc_errors:
+            return {}
+        err = np.stack(self.loc_errors)
+        return {
+            "method": "amcl",
+            "mean_error_m": round(float(err.mean()), 4),
+            "max_error_m": round(float(err.max()), 4),
+            "final_max_error_m": round(float(err[-1].max()), 4),
+        }
+
     def _run_due_commands(self) -> None:
         eps = 1e-9
         while self._pending and self._pending[0][1].at_s <= self.t + eps:
@@ -548,7 +620,7 @@ class Supervisor:
         return ControlView(
             t=sim.t,
             dt=sim.dt,
-            poses=sim.poses.copy(),
+            poses=(self.estimates if self.localizer is not None else sim.poses).copy(),
             vel=sim.vel.copy(),
             goals=self.goals.copy(),
             active=self.has_goal
@@ -568,6 +640,7 @@ class Supervisor:
             static_pieces=sim.static_pieces,
             goal_changed=self.goal_changed.copy(),
             hold=self.held(),
+            stopped=self.stopped | self.teleop | self.estopped,
             hold_zones=tuple(self.hold_zones()),
         )
 
@@ -604,6 +677,8 @@ class Supervisor:
         self.goal_changed[:] = False
         hold = np.full(self.sim.n, self.estopped)
         step = self.sim.step(cmd, hold=hold)
+        if self.localizer is not None:
+            self._sense()
         self._last_cmd = cmd
         # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
         paused = self.stopped | self.teleop | self.estopped | view.hold

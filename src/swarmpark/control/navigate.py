@@ -54,6 +54,11 @@ class NavParams:
     influence_m: float = 0.5
     #: Near its goal a skid ignores obstacles farther than this (parked neighbours sit there).
     influence_at_goal_m: float = 0.15
+    #: Skid-skid avoidance: "rvo" (ORCA with priorities on the skids' effective centres,
+    #: issue 5) or "monitor" (the collision monitor alone, with right of way at bottlenecks).
+    avoidance: str = "monitor"
+    #: Priority given to skids holding still on their goal or with no goal: they yield.
+    parked_priority: float = 0.0
     replan_period_s: float = 3.0
     #: Paths are searched on the map coarsened to this resolution (conservatively).
     plan_resolution_m: float = 0.1
@@ -340,9 +345,23 @@ class Navigator:
         raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
         # At the goal position, only turn to the goal heading.
         raw = self._dock(view, idx, raw, targets, final)
+        if p.avoidance == "rvo":
+            full = np.zeros((n, 2))
+            full[idx] = raw
+            full = self._orca(view, full)
+            moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
+            cmd[moving] = self._monitor(view, moving, full[moving], robots=False)
+            self._hold_outside(view, idx, cmd)
+            self._track_stalls(view, idx, cmd)
+            return cmd
         raw = self._give_way(view, idx, raw, dist_goal)
         cmd[idx] = self._monitor(view, idx, raw)
         self._hold_outside(view, idx, cmd)
+        self._track_stalls(view, idx, cmd)
+        return cmd
+
+    def _track_stalls(self, view: ControlView, idx: np.ndarray, cmd: np.ndarray) -> None:
+        p = self.params
         for i in idx:  # how long the monitor or the field has kept a skid (nearly) still
             nav = self._robots[i]
             still = (
@@ -351,7 +370,6 @@ class Navigator:
                 and not nav.docked
             )
             nav.stalled_s = nav.stalled_s + view.dt if still else 0.0
-        return cmd
 
     def _dock(self, view: ControlView, idx, raw, targets, final) -> np.ndarray:
         """The parking manoeuvre to the exact pose, in the goal frame.
@@ -583,7 +601,9 @@ class Navigator:
         out_r[: len(rear)] = rear
         return out_f, out_r
 
-    def _monitor(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    def _monitor(
+        self, view: ControlView, idx: np.ndarray, raw: np.ndarray, *, robots: bool = True
+    ) -> np.ndarray:
         """Scale each command down until its short forward simulation is collision-free."""
         p = self.params
         n_act = len(idx)
@@ -636,7 +656,7 @@ class Navigator:
         lens = np.fromiter(map(len, cand), int, len(cand))
         qa = np.repeat(np.arange(len(cand)), lens)
         qb = np.fromiter(itertools.chain.from_iterable(cand), int, int(lens.sum()))
-        keep = qb != idx[owner[qa]]
+        keep = (qb != idx[owner[qa]]) & robots
         qa, qb = qa[keep], qb[keep]
         blockers: list[set[int]] = [set() for _ in range(n_act)]
         if len(qa):
@@ -666,6 +686,80 @@ class Navigator:
             nav.blocked_s = nav.blocked_s + view.dt if nav.blockers else 0.0
         return out
 
+    def _orca(self, view: ControlView, raw: np.ndarray) -> np.ndarray:
+        """ORCA with priorities on every skid's effective centre (see :mod:`.rvo`).
+
+        The field's command is the preferred velocity; skids holding still on a goal (or
+        without one) take ``parked_priority`` and so make room, and come back afterwards by
+        their own docking; stopped skids (no goal change allowed) are immobile.
+        """
+        from .rvo import (
+            OrcaParams,
+            effective_reach,
+            holonomic_speed_limit,
+            holonomic_to_unicycle,
+            orca_step,
+            prepare_obstacles,
+            skid_shapes,
+            tracking_error_bound,
+            unicycle_to_holonomic,
+        )
+
+        self._outlines(view)
+        if getattr(self, "_orca_key", None) != id(view.static_pieces):
+            # Static pieces are convex (triangles and squares padded to 4 corners).
+            pieces = [np.unique(pc, axis=0) for pc in view.static_pieces]
+            polys = []
+            for pc in pieces:
+                c = pc.mean(axis=0)
+                order = np.argsort(np.arctan2(pc[:, 1] - c[1], pc[:, 0] - c[0]))
+                polys.append(pc[order])
+            self._orca_obstacles = prepare_obstacles(polys)
+            self._orca_key = id(view.static_pieces)
+        d = view.max_speed / view.max_yaw_rate  # effective centre: full speed is reachable
+        u_lim = holonomic_speed_limit(view.max_speed, view.max_yaw_rate, d)
+        err = tracking_error_bound(
+            u_lim, view.max_yaw_rate, effective_reach(self._plain, d), view.dt
+        )
+        centres, shapes = skid_shapes(view.poses, self._plain, offset_m=d, margin_m=err)
+        u_now = unicycle_to_holonomic(view.poses, view.vel[:, 0], view.vel[:, 1], offset_m=d)
+        u_pref = unicycle_to_holonomic(view.poses, raw[:, 0], raw[:, 1], offset_m=d)
+        docked = np.array([r.docked for r in self._robots], dtype=bool)
+        yielding = docked | ~view.active
+        prio = np.where(yielding, self.params.parked_priority, view.priority)
+        immobile = np.zeros(len(view.poses), dtype=bool)
+        if view.stopped is not None:
+            immobile = view.stopped.copy()
+        res = orca_step(
+            centres,
+            u_now,
+            u_pref,
+            u_lim,
+            prio,
+            shapes,
+            dt_s=view.dt,
+            params=OrcaParams(),
+            immobile=immobile,
+            people_positions=view.people_xy,
+            people_velocities=view.people_vel,
+            people_radii=view.people_radius,
+            obstacles=self._orca_obstacles,
+        )
+        v, w = holonomic_to_unicycle(
+            view.poses,
+            res.velocities,
+            offset_m=d,
+            v_max=view.max_speed,
+            omega_max=view.max_yaw_rate,
+        )
+        out = np.column_stack([v, w])
+        # Pure turns in place (u = 0 at the centre would drop them) pass through when ORCA
+        # left the preferred velocity unchanged.
+        same = np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9
+        out[same] = raw[same]
+        out[immobile] = 0.0
+        return out
+
     def _within_margin(self, view: ControlView, idx: np.ndarray, grown: np.ndarray) -> np.ndarray:
         """Skids whose grown footprint overlaps a static solid or another skid right now."""
         corners = footprint_corners(view.poses[idx], grown)
@@ -675,9 +769,7 @@ class Navigator:
         if len(qi):
             hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
             out[qi[hit]] = True
-        others = footprint_corners(
-            view.poses, self._plain
-        )
+        others = footprint_corners(view.poses, self._plain)
         ia, ib = np.meshgrid(np.arange(len(idx)), np.arange(len(view.poses)), indexing="ij")
         ia, ib = ia.ravel(), ib.ravel()
         near = np.linalg.norm(view.poses[idx[ia], :2] - view.poses[ib, :2], axis=1) < 3.0
