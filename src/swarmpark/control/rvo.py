@@ -86,6 +86,8 @@ LP_EPSILON = 1e-9
 MIN_EDGE_M = 1e-12
 #: Times the safety filter halves a velocity before it stops the robot.
 SAFETY_HALVINGS = 4
+#: Above this many edge pairs, the Minkowski merge sorts instead of counting ranks.
+SMALL_MERGE = 64
 #: Sides of the regular polygon that covers a person's disc (circumscribed: conservative).
 DEFAULT_DISC_SIDES = 8
 
@@ -118,6 +120,12 @@ class OrcaParams:
     slowest_fallback
         Where the half-planes are infeasible, take the slowest of the velocities that violate
         them least (``False``: RVO2's choice, an arbitrary extreme point of that set).
+    leg_preference
+        Robots with flat faces meeting head-on: ORCA's nearest boundary point of the
+        velocity obstacle is on the flat cut-off face, which only brakes (discs pass each
+        other thanks to curvature). A leg of the cone at most ``leg_preference`` times the
+        relative speed farther than that face is used instead, so they start passing; ties
+        keep right. Any boundary point keeps ORCA's guarantee; ``0`` is plain ORCA.
     safety_filter
         After the decision, check every pair of robots (and robot and static obstacle) for
         overlap while moving straight with the chosen velocities for one step; robots in such
@@ -136,6 +144,7 @@ class OrcaParams:
     disc_sides: int = DEFAULT_DISC_SIDES
     slowest_fallback: bool = False
     safety_filter: bool = True
+    leg_preference: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("time_horizon_s", "time_horizon_obst_s"):
@@ -151,6 +160,10 @@ class OrcaParams:
         ):
             raise ValueError(
                 f"OrcaParams.neighbour_dist_m must be None or > 0 (got {self.neighbour_dist_m!r})"
+            )
+        if not (np.isfinite(self.leg_preference) and self.leg_preference >= 0):
+            raise ValueError(
+                f"OrcaParams.leg_preference must be >= 0 (got {self.leg_preference!r})"
             )
         if not (0.0 <= self.min_share <= 0.5):
             raise ValueError(f"OrcaParams.min_share must lie in [0, 0.5] (got {self.min_share!r})")
@@ -272,6 +285,103 @@ def _check_convex_ccw(polys: np.ndarray, name: str) -> None:
 # geometry of the velocity obstacle
 
 
+def _pseudo_angle(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """A strictly increasing function of ``atan2(y, x)`` on ``[0, 2 pi)``, values in ``[0, 4)``,
+    without trigonometry (only the order of angles is needed)."""
+    s = np.abs(x) + np.abs(y)
+    r = x / np.where(s > 0, s, 1.0)
+    return np.where(y >= 0, 1.0 - r, 3.0 + r)
+
+
+def _cyclic_next(a: np.ndarray) -> np.ndarray:
+    """The next vertex along axis 0 (vertex-major layout ``(V, P)``)."""
+    return np.concatenate([a[1:], a[:1]], axis=0)
+
+
+def _arg_extreme(a: np.ndarray, largest: bool) -> np.ndarray:
+    """``argmax``/``argmin`` over the short axis 0 of ``(V, P)``: a loop over ``V`` rows is
+    much faster in numpy than a per-column reduction; ties go to the first index."""
+    best = a[0].copy()
+    idx = np.zeros(a.shape[1], dtype=np.intp)
+    for k in range(1, a.shape[0]):
+        better = a[k] > best if largest else a[k] < best
+        best = np.where(better, a[k], best)
+        idx = np.where(better, k, idx)
+    return idx
+
+
+def _minkowski_xy(bx, by, ax, ay):
+    """``B ⊕ (-A)`` in vertex-major layout: ``(K, P)`` and ``(L, P)`` in, ``(K + L, P)`` out.
+
+    Edges of both polygons are merged by angle; each edge's place in the merged walk is its
+    rank within its own polygon plus the number of the other polygon's edges before it.
+    """
+    nax, nay = -ax, -ay  # a point reflection keeps counter-clockwise order
+    ebx, eby = _cyclic_next(bx) - bx, _cyclic_next(by) - by
+    eax, eay = _cyclic_next(nax) - nax, _cyclic_next(nay) - nay
+    # Zero-length edges (padding) go last and add nothing to the walk.
+    ang_b = np.where(np.abs(ebx) + np.abs(eby) > MIN_EDGE_M, _pseudo_angle(ebx, eby), np.inf)
+    ang_a = np.where(np.abs(eax) + np.abs(eay) > MIN_EDGE_M, _pseudo_angle(eax, eay), np.inf)
+    k_b, k_a = ang_b.shape[0], ang_a.shape[0]
+    cols = np.arange(bx.shape[1])
+    if k_b * k_a > SMALL_MERGE:
+        return _minkowski_sorted(bx, by, nax, nay, ebx, eby, eax, eay, ang_b, ang_a)
+
+    def own_rank(ang):
+        first = _arg_extreme(ang, False)
+        if np.all(np.isfinite(ang)):
+            # No padding: edges of a convex polygon are already in cyclic angle order.
+            return (np.arange(ang.shape[0])[:, None] - first) % ang.shape[0], first
+        rank = np.zeros(ang.shape, dtype=np.intp)
+        for k in range(ang.shape[0]):
+            for m in range(ang.shape[0]):
+                if m != k:
+                    rank[k] += (ang[m] < ang[k]) | ((ang[m] == ang[k]) & (m < k))
+        return rank, first
+
+    (rank_b, first_b), (rank_a, first_a) = own_rank(ang_b), own_rank(ang_a)
+    pos_b, pos_a = rank_b.copy(), rank_a.copy()
+    for k in range(k_b):
+        for m in range(k_a):
+            # On equal angles the edge of B goes first.
+            less = ang_a[m] < ang_b[k]
+            pos_b[k] += less
+            pos_a[m] += ~less
+    n_cols = bx.shape[1]
+    flat = np.concatenate([pos_b, pos_a], axis=0) * n_cols + cols
+    ex = np.empty((k_b + k_a) * n_cols)
+    ey = np.empty_like(ex)
+    ex[flat.ravel()] = np.concatenate([ebx, eax], axis=0).ravel()
+    ey[flat.ravel()] = np.concatenate([eby, eay], axis=0).ravel()
+    ex, ey = ex.reshape(-1, n_cols), ey.reshape(-1, n_cols)
+    # The walk starts at the sum of the tails of both polygons' first edges.
+    sx = bx[first_b, cols] + nax[first_a, cols]
+    sy = by[first_b, cols] + nay[first_a, cols]
+    out_x = np.empty_like(ex)
+    out_y = np.empty_like(ey)
+    out_x[0], out_y[0] = sx, sy
+    out_x[1:] = sx + np.cumsum(ex[:-1], axis=0)
+    out_y[1:] = sy + np.cumsum(ey[:-1], axis=0)
+    return out_x, out_y
+
+
+def _minkowski_sorted(bx, by, nax, nay, ebx, eby, eax, eay, ang_b, ang_a):
+    """The edge merge of :func:`_minkowski_xy` by a sort, for polygons with many vertices."""
+    cols = np.arange(bx.shape[1])
+    kb, ka = np.argmin(ang_b, axis=0), np.argmin(ang_a, axis=0)
+    sx = bx[kb, cols] + nax[ka, cols]
+    sy = by[kb, cols] + nay[ka, cols]
+    ang = np.concatenate([ang_b, ang_a], axis=0)
+    order = np.argsort(ang, axis=0, kind="stable")
+    ex = np.take_along_axis(np.concatenate([ebx, eax], axis=0), order, axis=0)
+    ey = np.take_along_axis(np.concatenate([eby, eay], axis=0), order, axis=0)
+    out_x, out_y = np.empty_like(ex), np.empty_like(ey)
+    out_x[0], out_y[0] = sx, sy
+    out_x[1:] = sx + np.cumsum(ex[:-1], axis=0)
+    out_y[1:] = sy + np.cumsum(ey[:-1], axis=0)
+    return out_x, out_y
+
+
 def minkowski_difference(b: np.ndarray, a: np.ndarray) -> np.ndarray:
     """Vertices of ``B ⊕ (-A)`` for batches of convex polygons, by merging edges by angle.
 
@@ -293,24 +403,94 @@ def minkowski_difference(b: np.ndarray, a: np.ndarray) -> np.ndarray:
     (-1.0, 1.0)
     """
     b = np.asarray(b, dtype=float)
-    neg_a = -np.asarray(a, dtype=float)  # a point reflection keeps counter-clockwise order
-    polys = (b, neg_a)
-    edges, angles, starts = [], [], []
-    for p in polys:
-        e = np.roll(p, -1, axis=1) - p
-        ang = np.mod(np.arctan2(e[..., 1], e[..., 0]), 2.0 * np.pi)
-        # Zero-length edges sort last and add nothing to the walk.
-        ang = np.where(np.linalg.norm(e, axis=-1) > MIN_EDGE_M, ang, np.inf)
-        k0 = np.argmin(ang, axis=1)
-        starts.append(np.take_along_axis(p, k0[:, None, None], axis=1)[:, 0])
-        edges.append(e)
-        angles.append(ang)
-    e = np.concatenate(edges, axis=1)
-    order = np.argsort(np.concatenate(angles, axis=1), axis=1, kind="stable")
-    e = np.take_along_axis(e, order[..., None], axis=1)
-    start = starts[0] + starts[1]
-    walk = np.cumsum(e, axis=1)
-    return np.concatenate([start[:, None], start[:, None] + walk[:, :-1]], axis=1)
+    a = np.asarray(a, dtype=float)
+    mx, my = _minkowski_xy(b[..., 0].T, b[..., 1].T, a[..., 0].T, a[..., 1].T)
+    return np.stack([mx.T, my.T], -1)
+
+
+def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0):
+    """Shortest move ``u`` from the relative velocity to the boundary of the velocity
+    obstacle, and the obstacle's outward normal ``n`` there (see :func:`pair_halfplanes`).
+
+    Vertex-major layout: ``rx, ry`` ``(V, P)`` region vertices, ``wx, wy`` ``(P,)``.
+    Returns ``ux, uy, nx, ny`` ``(P,)``.
+    """
+    cols = np.arange(rx.shape[1])
+    ex, ey = _cyclic_next(rx) - rx, _cyclic_next(ry) - ry
+    elen = np.sqrt(ex * ex + ey * ey)
+    real = elen > MIN_EDGE_M
+    inv_len = 1.0 / np.maximum(elen, MIN_EDGE_M)
+    # Outward normal of a counter-clockwise polygon: the right-hand perpendicular of the edge.
+    nx, ny = ey * inv_len, -ex * inv_len
+    front = real & (nx * rx + ny * ry < 0.0)  # the origin lies outside this edge's line
+    colliding = ~np.any(front, axis=0)
+
+    inv = np.where(colliding, inv_dt, inv_horizon)
+    # The cut-off polygon: region / tau, or region / dt when the shapes overlap now.
+    qx, qy = rx * inv, ry * inv
+    esx, esy = ex * inv, ey * inv
+
+    # Legs of the cone: rays from the origin through the extreme vertices seen from it.
+    cx, cy = rx.mean(axis=0), ry.mean(axis=0)
+    key = _pseudo_angle(cx * rx + cy * ry, cx * ry - cy * rx)
+    # Angles relative to the centroid lie in (-pi, pi): shift so that the order is monotone.
+    key = np.where(key >= 2.0, key - 4.0, key)
+    kl, kr = _arg_extreme(key, True), _arg_extreme(key, False)
+    lx, ly, gx, gy = rx[kl, cols], ry[kl, cols], rx[kr, cols], ry[kr, cols]
+    ll = 1.0 / np.maximum(np.sqrt(lx * lx + ly * ly), MIN_EDGE_M)
+    gl = 1.0 / np.maximum(np.sqrt(gx * gx + gy * gy), MIN_EDGE_M)
+    lux, luy, gux, guy = lx * ll, ly * ll, gx * gl, gy * gl
+
+    # Facets: edges facing the origin and both legs (no collision) or all edges (collision).
+    # The largest signed distance tells inside from outside.
+    dxw, dyw = wx - qx, wy - qy
+    s_edge = np.where(real & (colliding | front), nx * dxw + ny * dyw, -np.inf)
+    k_edge = _arg_extreme(s_edge, True)
+    s_in = s_edge[k_edge, cols]
+    nix, niy = nx[k_edge, cols], ny[k_edge, cols]
+    s_left = np.where(colliding, -np.inf, -luy * wx + lux * wy)
+    s_right = np.where(colliding, -np.inf, guy * wx - gux * wy)
+    # Exact ties (mirror-symmetric encounters) go to the right leg: both robots keep right.
+    right = s_right >= s_left
+    s_leg = np.where(right, s_right, s_left)
+    lnx, lny = np.where(right, guy, -luy), np.where(right, -gux, lux)
+    inside = np.maximum(s_in, s_leg) <= 0.0
+    # Inside, any facet line supports the obstacle, so any of them keeps the reciprocal
+    # guarantee. ORCA takes the nearest; a flat cut-off face (rectangles) then only ever
+    # brakes two robots meeting head-on. A leg within leg_preference * |w| of the face is
+    # taken instead, so that they start passing each other (as discs do by curvature).
+    speed = np.sqrt(wx * wx + wy * wy)
+    take_leg = ~colliding & (s_leg + leg_preference * speed >= s_in)
+    s_in = np.where(take_leg, s_leg, s_in)
+    nix, niy = np.where(take_leg, lnx, nix), np.where(take_leg, lny, niy)
+
+    # Outside: project on the boundary pieces. Edges facing away lie inside the obstacle and
+    # are never closer than the boundary, so all edges can be tried.
+    t = np.clip((dxw * esx + dyw * esy) / np.maximum(esx * esx + esy * esy, 1e-300), 0.0, 1.0)
+    px, py = qx + t * esx, qy + t * esy
+    d2 = (wx - px) ** 2 + (wy - py) ** 2
+    k_out = _arg_extreme(d2, False)
+    best = d2[k_out, cols]
+    bx, by = px[k_out, cols], py[k_out, cols]
+    for ux_, uy_, sx_, sy_ in ((lux, luy, lx, ly), (gux, guy, gx, gy)):
+        ox, oy = sx_ * inv, sy_ * inv
+        tr = np.maximum((wx - ox) * ux_ + (wy - oy) * uy_, 0.0)
+        cxr, cyr = ox + tr * ux_, oy + tr * uy_
+        dr = (wx - cxr) ** 2 + (wy - cyr) ** 2
+        take = ~colliding & (dr < best)
+        best = np.where(take, dr, best)
+        bx, by = np.where(take, cxr, bx), np.where(take, cyr, by)
+    awx, awy = wx - bx, wy - by
+    dist = np.sqrt(awx * awx + awy * awy)
+    # A tangent-point normal is ill-defined for a relative velocity on the boundary itself:
+    # then the facet normal found above is the outward normal.
+    far = dist > 1e-12
+    inv_d = 1.0 / np.maximum(dist, 1e-12)
+    nox, noy = np.where(far, awx * inv_d, nix), np.where(far, awy * inv_d, niy)
+
+    ux = np.where(inside, -s_in * nix, bx - wx)
+    uy = np.where(inside, -s_in * niy, by - wy)
+    return ux, uy, np.where(inside, nix, nox), np.where(inside, niy, noy), inside
 
 
 def pair_halfplanes(
@@ -320,6 +500,8 @@ def pair_halfplanes(
     share: np.ndarray,
     inv_horizon: np.ndarray,
     inv_dt: float,
+    leg_preference: float = 0.0,
+    slack_share: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """ORCA half-planes for pairs, from the collision region in relative-position space.
 
@@ -342,6 +524,12 @@ def pair_halfplanes(
         ``(P,)`` ``1 / tau``.
     inv_dt
         ``1 / dt``, used when the shapes overlap now.
+    leg_preference
+        Inside the obstacle, take a leg of the cone instead of the nearer cut-off face when
+        it is at most ``leg_preference * |rel_velocity|`` farther (see ``OrcaParams``).
+    slack_share
+        ``(P,)`` share used instead of ``share`` when the relative velocity is outside the
+        obstacle: ``u`` then is room to approach, not avoidance to do. ``None``: ``share``.
 
     Returns
     -------
@@ -350,65 +538,27 @@ def pair_halfplanes(
     """
     q = np.asarray(region, dtype=float)
     w = np.asarray(rel_velocity, dtype=float)
-    e = np.roll(q, -1, axis=1) - q
-    elen = np.linalg.norm(e, axis=-1)
-    real = elen > MIN_EDGE_M
-    # Outward normal of a counter-clockwise polygon: the right-hand perpendicular of the edge.
-    n_edge = np.stack([e[..., 1], -e[..., 0]], -1) / np.maximum(elen, MIN_EDGE_M)[..., None]
-    origin_out = -_dot(n_edge, q)  # > 0: the origin lies outside this edge's line
-    colliding = ~np.any(real & (origin_out > 0.0), axis=1)
-
-    inv = np.where(colliding, inv_dt, inv_horizon)[:, None, None]
-    qs, es = q * inv, e * inv  # the cut-off polygon (region / tau, or / dt when colliding)
-
-    # Legs of the cone: rays from the origin through the extreme vertices seen from it.
-    centroid = q.mean(axis=1, keepdims=True)
-    ang = np.arctan2(_det(centroid, q), _dot(centroid, q))
-    left = np.take_along_axis(q, np.argmax(ang, axis=1)[:, None, None], axis=1)[:, 0]
-    right = np.take_along_axis(q, np.argmin(ang, axis=1)[:, None, None], axis=1)[:, 0]
-    left_u = left / np.maximum(np.linalg.norm(left, axis=-1), MIN_EDGE_M)[:, None]
-    right_u = right / np.maximum(np.linalg.norm(right, axis=-1), MIN_EDGE_M)[:, None]
-    n_left = np.stack([-left_u[:, 1], left_u[:, 0]], -1)
-    n_right = np.stack([right_u[:, 1], -right_u[:, 0]], -1)
-
-    # Facets of the obstacle: edges facing the origin and both legs (no collision), or all
-    # edges (collision). The largest signed distance tells inside from outside.
-    facet_n = np.concatenate([n_edge, n_left[:, None], n_right[:, None]], axis=1)
-    facet_p = np.concatenate([qs, np.zeros((len(q), 2, 2))], axis=1)
-    facet_on = np.concatenate(
-        [real & (colliding[:, None] | (origin_out > 0.0)), np.repeat(~colliding[:, None], 2, 1)],
-        axis=1,
+    ux, uy, nx, ny, inside = _vo_projection(
+        np.ascontiguousarray(q[..., 0].T),
+        np.ascontiguousarray(q[..., 1].T),
+        w[:, 0].copy(),
+        w[:, 1].copy(),
+        np.broadcast_to(np.asarray(inv_horizon, dtype=float), w.shape[:1]),
+        inv_dt,
+        leg_preference,
     )
-    signed = np.where(facet_on, _dot(facet_n, w[:, None] - facet_p), -np.inf)
-    k_in = np.argmax(signed, axis=1)
-    s_max = np.take_along_axis(signed, k_in[:, None], axis=1)[:, 0]
-    n_in = np.take_along_axis(facet_n, k_in[:, None, None], axis=1)[:, 0]
-    inside = s_max <= 0.0
+    share = np.broadcast_to(np.asarray(share, dtype=float), inside.shape)
+    if slack_share is not None:
+        share = np.where(inside, share, slack_share)
+    return _lines(own_velocity, share, ux, uy, nx, ny)
 
-    # Outside: project on the boundary pieces. Edges facing away lie inside the obstacle and
-    # are never closer than the boundary, so all edges can be tried.
-    rel = w[:, None] - qs
-    t = np.clip(_dot(rel, es) / np.maximum(_dot(es, es), MIN_EDGE_M**2), 0.0, 1.0)
-    cand = qs + t[..., None] * es
-    ray_start = np.stack([left, right], 1) * inv[:, :, 0][:, :, None]
-    ray_dir = np.stack([left_u, right_u], 1)
-    t_ray = np.maximum(_dot(w[:, None] - ray_start, ray_dir), 0.0)
-    ray_pts = ray_start + t_ray[..., None] * ray_dir
-    cand = np.concatenate([cand, ray_pts], axis=1)
-    d2 = _dot(w[:, None] - cand, w[:, None] - cand)
-    d2[:, -2:] = np.where(colliding[:, None], np.inf, d2[:, -2:])
-    k_out = np.argmin(d2, axis=1)
-    proj = np.take_along_axis(cand, k_out[:, None, None], axis=1)[:, 0]
-    away = w - proj
-    dist = np.linalg.norm(away, axis=-1)
-    # Tangent-point normals are ill-defined for a relative velocity on the boundary itself:
-    # then the facet normal found above is the outward normal.
-    n_out = np.where((dist > 1e-12)[:, None], away / np.maximum(dist, 1e-12)[:, None], n_in)
 
-    u = np.where(inside[:, None], -s_max[:, None] * n_in, proj - w)
-    n = np.where(inside[:, None], n_in, n_out)
-    point = np.asarray(own_velocity, dtype=float) + np.asarray(share, dtype=float)[:, None] * u
-    direction = np.stack([n[:, 1], -n[:, 0]], -1)
+def _lines(own_velocity, share, ux, uy, nx, ny):
+    """RVO2 line form of ``{v : (v - (own + share * u)) · n >= 0}``."""
+    own = np.asarray(own_velocity, dtype=float)
+    sh = np.asarray(share, dtype=float)
+    point = np.stack([own[:, 0] + sh * ux, own[:, 1] + sh * uy], -1)
+    direction = np.stack([ny, -nx], -1)
     return point, direction
 
 
@@ -737,14 +887,10 @@ def holonomic_to_unicycle(
     omega = (-u[:, 0] * s + u[:, 1] * c) / d
     vm = np.broadcast_to(np.asarray(v_max, dtype=float), v.shape)
     wm = np.broadcast_to(np.asarray(omega_max, dtype=float), v.shape)
-    with np.errstate(divide="ignore"):
-        scale = np.minimum(
-            1.0,
-            np.minimum(
-                np.where(np.abs(v) > vm, vm / np.abs(v), 1.0),
-                np.where(np.abs(omega) > wm, wm / np.abs(omega), 1.0),
-            ),
-        )
+    if np.any(vm <= 0) or np.any(wm <= 0):
+        raise ValueError(f"v_max and omega_max must be > 0 (got {v_max!r}, {omega_max!r})")
+    # One factor for both, so the effective centre keeps its direction.
+    scale = np.minimum(vm / np.maximum(np.abs(v), vm), wm / np.maximum(np.abs(omega), wm))
     return v * scale, omega * scale
 
 
@@ -778,7 +924,10 @@ def prepare_obstacles(polygons: Sequence) -> StaticObstacles:
         else:
             if _det(p, np.roll(p, -1, axis=0)).sum() < 0:
                 p = p[::-1].copy()
-            _check_convex_ccw(p[None], f"obstacles[{i}]")
+            try:
+                _check_convex_ccw(p[None], "obstacle")
+            except ValueError:
+                raise ValueError(f"obstacles[{i}]: not a convex polygon: {p.tolist()}") from None
             if _det(p, np.roll(p, -1, axis=0)).sum() <= 0:
                 raise ValueError(f"obstacles[{i}]: polygon of zero area: {p.tolist()}")
             geoms.append(shapely.Polygon(p))
@@ -815,6 +964,37 @@ def _scatter(n: int, m: int, rows, slots, point, direction):
     return p, d, v
 
 
+def _edge_planes(rx: np.ndarray, ry: np.ndarray):
+    """Edge lines of convex regions ``(V, P)``: unit outward normals ``n`` and offsets ``c``
+    (interior: ``n · x < c`` for every real edge), and the mask of real edges."""
+    ex, ey = _cyclic_next(rx) - rx, _cyclic_next(ry) - ry
+    elen = np.sqrt(ex * ex + ey * ey)
+    real = elen > MIN_EDGE_M
+    inv_len = 1.0 / np.maximum(elen, MIN_EDGE_M)
+    nx, ny = ey * inv_len, -ex * inv_len
+    return nx, ny, nx * rx + ny * ry, real
+
+
+def _sweep(planes, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """Whether ``t * (dx, dy)``, ``0 <= t <= 1``, enters the interior of the regions."""
+    nx, ny, c, real = planes
+    # Inside edge e at time t: t * (n_e . d) < c_e - tol (touching is not a hit).
+    a = nx * dx + ny * dy
+    b = c - TOUCH_TOLERANCE_M
+    flat = np.abs(a) <= 1e-15
+    blocked = np.any(real & flat & (b <= 0.0), axis=0)
+    ratio = b / np.where(flat, 1.0, a)
+    cut = real & ~flat
+    t_hi = np.minimum(1.0, np.min(np.where(cut & (a > 0), ratio, np.inf), axis=0))
+    t_lo = np.maximum(0.0, np.max(np.where(cut & (a < 0), ratio, -np.inf), axis=0))
+    return ~blocked & (t_lo < t_hi)
+
+
+def _inside_now(planes) -> np.ndarray:
+    nx, ny, c, real = planes
+    return ~np.any(real & (c - TOUCH_TOLERANCE_M <= 0.0), axis=0)
+
+
 def sweep_hits(region: np.ndarray, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Whether the straight path ``t * displacement`` (``0 <= t <= 1``) enters the interior
     of convex ``region`` ``(P, V, 2)``, and whether it starts inside.
@@ -832,50 +1012,30 @@ def sweep_hits(region: np.ndarray, displacement: np.ndarray) -> tuple[np.ndarray
     """
     q = np.asarray(region, dtype=float)
     disp = np.asarray(displacement, dtype=float)
-    e = np.roll(q, -1, axis=1) - q
-    elen = np.linalg.norm(e, axis=-1)
-    real = elen > MIN_EDGE_M
-    n_edge = np.stack([e[..., 1], -e[..., 0]], -1) / np.maximum(elen, MIN_EDGE_M)[..., None]
-    # Inside edge e at time t: t * (n_e . disp) < n_e . q_e - tol (touching is not a hit).
-    a = _dot(n_edge, disp[:, None])
-    b = _dot(n_edge, q) - TOUCH_TOLERANCE_M
-    flat = np.abs(a) <= 1e-15
-    blocked = np.any(real & flat & (b <= 0.0), axis=1)
-    ratio = b / np.where(flat, 1.0, a)
-    t_hi = np.minimum(1.0, np.min(np.where(real & ~flat & (a > 0), ratio, np.inf), axis=1))
-    t_lo = np.maximum(0.0, np.max(np.where(real & ~flat & (a < 0), ratio, -np.inf), axis=1))
-    hits = ~blocked & (t_lo < t_hi)
-    inside_now = ~np.any(real & (b <= 0.0), axis=1)
-    return hits, inside_now
+    planes = _edge_planes(np.ascontiguousarray(q[..., 0].T), np.ascontiguousarray(q[..., 1].T))
+    return _sweep(planes, disp[:, 0], disp[:, 1]), _inside_now(planes)
 
 
-def _safety_filter(pos, vel, shapes, dt, obstacles, obstacle_pairs):
+def _safety_filter(vel, dt, robot_pairs, obstacle_pairs):
     """Slow robots whose straight one-step motions overlap (see ``OrcaParams.safety_filter``).
 
-    Scales only go down and a stopped pair that does not overlap now is safe, so the loop
-    ends; pairs that overlap already are left to ORCA's separating constraints.
+    ``robot_pairs`` is ``(i, j, rx, ry)`` for every pair that can meet within one step
+    (regions in vertex-major layout) and ``obstacle_pairs`` ``(i, rx, ry)``. Scales only go
+    down and a stopped pair that does not overlap now is safe, so the loop ends; pairs that
+    overlap already are left to ORCA's separating constraints.
     """
-    n = pos.shape[0]
-    reach = np.linalg.norm(shapes, axis=-1).max(axis=1)
-    speed = np.linalg.norm(vel, axis=-1)
-    cut = 2.0 * reach.max() + 2.0 * speed.max() * dt
-    pairs = cKDTree(pos).query_pairs(cut, output_type="ndarray") if n > 1 else np.zeros((0, 2))
-    i, j = pairs[:, 0].astype(int), pairs[:, 1].astype(int)
-    region = (pos[j] - pos[i])[:, None] + minkowski_difference(shapes[j], shapes[i])
-    if obstacle_pairs is not None:
-        io, oregion = obstacle_pairs
-    else:
-        io, oregion = np.zeros(0, dtype=int), np.zeros((0, 3, 2))
+    n = vel.shape[0]
+    i, j, rx, ry = robot_pairs
+    io, ox, oy = obstacle_pairs
+    planes, o_planes = _edge_planes(rx, ry), _edge_planes(ox, oy)
+    free, o_free = ~_inside_now(planes), ~_inside_now(o_planes)
     scale = np.ones(n)
-    _, inside_now = sweep_hits(region, np.zeros((len(i), 2)))
-    _, o_inside_now = sweep_hits(oregion, np.zeros((len(io), 2)))
     halvings = 0
     while True:
         v = vel * scale[:, None]
-        hit, _ = sweep_hits(region, (v[i] - v[j]) * dt)
-        hit &= ~inside_now
-        o_hit, _ = sweep_hits(oregion, v[io] * dt)
-        o_hit &= ~o_inside_now
+        d = (v[i] - v[j]) * dt
+        hit = _sweep(planes, d[:, 0], d[:, 1]) & free
+        o_hit = _sweep(o_planes, v[io, 0] * dt, v[io, 1] * dt) & o_free
         bad = np.zeros(n, dtype=bool)
         bad[i[hit]] = True
         bad[j[hit]] = True
@@ -983,7 +1143,11 @@ def orca_step(
                 inv_dt,
             )
             n_hard = int(rank.max()) + 1
-            obstacle_pairs = (ia, region)
+            obstacle_pairs = (
+                ia,
+                np.ascontiguousarray(region[..., 0].T),
+                np.ascontiguousarray(region[..., 1].T),
+            )
             blocks.append(_scatter(n, n_hard, ia, rank, pt, dr))
 
     # People: moving discs, full share.
@@ -1014,47 +1178,98 @@ def orca_step(
                 j = idx[rows, slots]
                 disc = disc_polygons(ppos[j] - pos[rows], prad[j], params.disc_sides)
                 region = minkowski_difference(disc, shp[rows])
+                # A person does not react, so any tangent of the velocity obstacle is safe;
+                # the one nearest the preferred velocity steps aside instead of only braking
+                # in front of a flat face (the nearest tangent to the current velocity).
                 pt, dr = pair_halfplanes(
                     region,
-                    vel[rows] - pvel[j],
-                    vel[rows],
+                    pref[rows] - pvel[j],
+                    pref[rows],
                     np.ones(rows.size),
                     np.full(rows.size, 1.0 / params.time_horizon_s),
                     inv_dt,
+                    params.leg_preference,
                 )
                 blocks.append(_scatter(n, k, rows, slots, pt, dr))
 
-    # Other robots: reciprocal, shares by priority.
-    if n > 1 and params.max_neighbours:
-        cut = params.neighbour_dist_m
-        if cut is None:
-            top = np.sort(speed)[-2:].sum()
-            cut = params.time_horizon_s * top + np.sort(reach)[-2:].sum()
-        k = min(params.max_neighbours + 1, n)
-        dist, idx = cKDTree(pos).query(pos, k=k, distance_upper_bound=cut)
-        ok = (idx < n) & (idx != np.arange(n)[:, None])
-        safe = np.where(ok, idx, 0)
-        rel = pos[safe] - pos[:, None]
-        # Nearest first; exact distance ties broken by geometry, not by robot index.
-        key_d = np.where(ok, dist, np.inf)
-        order = np.lexsort((rel[..., 1], rel[..., 0], key_d), axis=-1)[:, : params.max_neighbours]
-        ok = np.take_along_axis(ok, order, axis=1)
-        safe = np.take_along_axis(safe, order, axis=1)
-        rows, slots = np.nonzero(ok)
-        if rows.size:
-            j = safe[rows, slots]
-            region = (pos[j] - pos[rows])[:, None] + minkowski_difference(shp[j], shp[rows])
-            share = responsibility_shares(prio[rows], prio[j], params.min_share)
-            share = np.where(still[j], 1.0, share)
-            pt, dr = pair_halfplanes(
-                region,
-                vel[rows] - vel[j],
-                vel[rows],
-                share,
-                np.full(rows.size, 1.0 / params.time_horizon_s),
-                inv_dt,
+    # Other robots: reciprocal, shares by priority. Each unordered pair is built once: the
+    # obstacle of j seen from i is the point reflection of that of i seen from j.
+    robot_pairs = (np.zeros(0, int), np.zeros(0, int), np.zeros((3, 0)), np.zeros((3, 0)))
+    if n > 1:
+        keys = []
+        rows = nb = slots = np.zeros(0, int)
+        m_agents = 0
+        if params.max_neighbours:
+            cut = params.neighbour_dist_m
+            if cut is None:
+                top = np.sort(speed)[-2:].sum()
+                cut = params.time_horizon_s * top + np.sort(reach)[-2:].sum()
+            k = min(params.max_neighbours + 1, n)
+            dist, idx = cKDTree(pos).query(pos, k=k, distance_upper_bound=cut)
+            ok = (idx < n) & (idx != np.arange(n)[:, None])
+            safe = np.where(ok, idx, 0)
+            rel = pos[safe] - pos[:, None]
+            # Nearest first; exact distance ties broken by geometry, not by robot index.
+            key_d = np.where(ok, dist, np.inf)
+            order = np.lexsort((rel[..., 1], rel[..., 0], key_d), axis=-1)
+            order = order[:, : params.max_neighbours]
+            ok = np.take_along_axis(ok, order, axis=1)
+            safe = np.take_along_axis(safe, order, axis=1)
+            m_agents = order.shape[1]
+            rows, slots = np.nonzero(ok)
+            nb = safe[rows, slots]
+            keys.append(np.minimum(rows, nb) * n + np.maximum(rows, nb))
+        n_orca = sum(len(x) for x in keys)
+        if params.safety_filter:
+            # Pairs that can touch within one step at the speed limits.
+            near = 2.0 * reach.max() + 2.0 * vmax.max() * dt_s
+            fp = cKDTree(pos).query_pairs(near, output_type="ndarray")
+            keys.append(fp[:, 0].astype(np.int64) * n + fp[:, 1])
+        if keys and sum(len(x) for x in keys):
+            uniq, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+            lo, hi = uniq // n, uniq % n
+            # Build each pair from the side of the robot with the smaller (x, y), not the
+            # smaller index, so that the floats do not depend on the robots' order.
+            swap = (pos[hi, 0] < pos[lo, 0]) | (
+                (pos[hi, 0] == pos[lo, 0]) & (pos[hi, 1] < pos[lo, 1])
             )
-            blocks.append(_scatter(n, order.shape[1], rows, slots, pt, dr))
+            lo, hi = np.where(swap, hi, lo), np.where(swap, lo, hi)
+            # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
+            sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
+            rx, ry = _minkowski_xy(sx[:, hi], sy[:, hi], sx[:, lo], sy[:, lo])
+            rx += pos[hi, 0] - pos[lo, 0]
+            ry += pos[hi, 1] - pos[lo, 1]
+            if params.safety_filter:
+                f_idx = np.unique(inverse[n_orca:])
+                robot_pairs = (lo[f_idx], hi[f_idx], rx[:, f_idx], ry[:, f_idx])
+            if rows.size:
+                used, pair_of = np.unique(inverse[:n_orca], return_inverse=True)
+                a, b = lo[used], hi[used]
+                ux, uy, nx, ny, inside = _vo_projection(
+                    rx[:, used],
+                    ry[:, used],
+                    vel[a, 0] - vel[b, 0],
+                    vel[a, 1] - vel[b, 1],
+                    np.full(used.size, 1.0 / params.time_horizon_s),
+                    inv_dt,
+                    params.leg_preference,
+                )
+                sign = np.where(rows == a[pair_of], 1.0, -1.0)
+                share = responsibility_shares(prio[rows], prio[nb], params.min_share)
+                # Outside the obstacle u is room to approach: the higher priority gets the
+                # larger part of it (the complement still sums to one over the pair).
+                share = np.where(inside[pair_of], share, 1.0 - share)
+                # Against a robot that will not move, all of it is ours, either way.
+                share = np.where(still[nb], 1.0, share)
+                pt, dr = _lines(
+                    vel[rows],
+                    share,
+                    sign * ux[pair_of],
+                    sign * uy[pair_of],
+                    sign * nx[pair_of],
+                    sign * ny[pair_of],
+                )
+                blocks.append(_scatter(n, m_agents, rows, slots, pt, dr))
 
     if blocks:
         point = np.concatenate([b[0] for b in blocks], axis=1)
@@ -1075,5 +1290,7 @@ def orca_step(
         )
     slowed = np.zeros(n, dtype=bool)
     if params.safety_filter and n:
-        out, slowed = _safety_filter(pos, out, shp, dt_s, obstacles, obstacle_pairs)
+        if obstacle_pairs is None:
+            obstacle_pairs = (np.zeros(0, int), np.zeros((3, 0)), np.zeros((3, 0)))
+        out, slowed = _safety_filter(out, dt_s, robot_pairs, obstacle_pairs)
     return OrcaResult(velocities=out, infeasible=infeasible, halfplanes=halfplanes, slowed=slowed)
