@@ -365,18 +365,43 @@ def test_fleet_localizer_tracks_every_skid_and_is_deterministic():
     assert pose_error_summary(sparse, truth)["mean_m"] < 0.05
 
 
-def test_occlusion_by_neighbours_does_not_trigger_recovery():
-    """Skids a metre apart hide walls from each other. Plain augmented MCL (Thrun's rule,
-    uniform injection, as amcl) reads that as a kidnapping and the estimates jump; the default
-    gating, or masking the beams that hit the neighbours' known footprints, keeps them
-    tracking."""
-    plain = FilterConfig(recovery_ratio=1.0, injection_candidates=0, recovery_min_beams=0)
-    est, truth = _fleet_run(seed=0, others_known=False, config=plain)
-    assert pose_error_summary(est, truth)["max_m"] > 0.5
-    est, truth = _fleet_run(seed=0, others_known=False)
-    assert pose_error_summary(est, truth)["max_m"] < 0.1
-    est, truth = _fleet_run(seed=0, others_known=True, config=plain)
-    assert pose_error_summary(est, truth)["max_m"] < 0.1
+def _row_run(config: FilterConfig, known: bool, seed: int = 1) -> dict:
+    """A skid drives 1.2 m past a row of eight parked skids that the map does not have, in a
+    20 m x 12 m hall whose walls are mostly out of range."""
+    g = grid_from_walls(
+        (20.0, 12.0),
+        0.05,
+        [box(0, 0, 20, 0.2), box(0, 11.8, 20, 12), box(0, 0, 0.2, 12), box(19.8, 0, 20, 12)],
+    )
+    gf = prepare_grid(g)
+    fp = Footprint(length_m=1.25, width_m=0.75, pivot_from_rear_m=0.25)
+    parked = np.array([[6.0 + 1.5 * i, 6.0, np.pi / 2] for i in range(8)])
+    row = footprint_corners(parked, np.broadcast_to(fp.corners_body(), (8, 4, 2)))
+    route = drive([[2.0, 4.8], [16.0, 4.8]])
+    spec = LidarSpec(range_noise_std_m=0.01)
+    rng = np.random.default_rng(seed)
+    loc = FleetLocalizer(
+        LikelihoodField(g, min_clearance_m=0.3),
+        spec,
+        route[:1],
+        rng=np.random.default_rng(seed + 1),
+        config=config,
+    )
+    est = []
+    for p in route:
+        r = scan(spec, p[None], gf, polygons=row, rng=rng)
+        est.append(loc.step(p[None], r, known_polygons=row if known else None))
+    return pose_error_summary(np.array(est), route[:, None, :])
+
+
+def test_unmapped_obstacles_hiding_the_walls_look_like_a_kidnapping_unless_known():
+    """A known limit of augmented MCL, kept visible: when obstacles the map lacks fill most of
+    the view, the fit drops as after a kidnapping, recovery injects particles where the scan
+    happens to fit walls, and the estimate jumps. Masking the obstacles (their places are
+    known to the fleet) or turning recovery off keeps the skid tracking."""
+    assert _row_run(FilterConfig(), known=False)["max_m"] > 1.0
+    assert _row_run(FilterConfig(), known=True)["max_m"] < 0.1
+    assert _row_run(FilterConfig(alpha_fast=0.0), known=False)["max_m"] < 0.1
 
 
 def test_beams_hitting_a_known_neighbour_are_masked():
