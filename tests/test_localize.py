@@ -271,13 +271,43 @@ def test_without_injection_a_kidnapped_skid_stays_lost():
     assert np.hypot(*(pf.estimate().pose[:2] - b[79, :2])) > 0.5
 
 
+NO_ODOMETRY_ERROR = {
+    "scale_error_std": 0.0,
+    "yaw_bias_std_rad_per_m": 0.0,
+    "trans_noise_m_per_sqrt_m": 0.0,
+    "yaw_noise_rad_per_sqrt_m": 0.0,
+    "turn_noise_rad_per_sqrt_rad": 0.0,
+}
+
+
+def test_odometry_noise_does_not_depend_on_the_step_rate():
+    """2000 skids drive 10 m straight in 5 cm or in 1 cm steps: the random distance and
+    heading errors have the configured spread (sd * sqrt(10 m)) either way."""
+    n = 2000
+    spreads = []
+    for step in (0.05, 0.01):
+        odo = OdometryDrift(
+            np.zeros((n, 3)),
+            **{
+                **NO_ODOMETRY_ERROR,
+                "trans_noise_m_per_sqrt_m": 0.01,
+                "yaw_noise_rad_per_sqrt_m": 0.004,
+            },
+            rng=np.random.default_rng(1),
+        )
+        for x in np.arange(step, 10.0 + 1e-9, step):
+            out = odo.step(np.column_stack([np.full(n, x), np.zeros(n), np.zeros(n)]))
+        spreads.append((np.hypot(out[:, 0], out[:, 1]).std(), out[:, 2].std()))
+    for dist_sd, yaw_sd in spreads:
+        assert dist_sd == pytest.approx(0.01 * np.sqrt(10.0), rel=0.1)
+        assert yaw_sd == pytest.approx(0.004 * np.sqrt(10.0), rel=0.1)
+
+
 def test_odometry_drift_is_seeded_grows_and_misses_a_kidnapping():
     truth = drive(ROUTE_A)
     exact = OdometryDrift(
         truth[:1],
-        alphas=(0, 0, 0, 0),
-        scale_error_std=0,
-        yaw_bias_std_rad_per_m=0,
+        **NO_ODOMETRY_ERROR,
         rng=np.random.default_rng(0),
     )
     out = np.array([exact.step(p[None])[0] for p in truth])
@@ -296,9 +326,7 @@ def test_odometry_drift_is_seeded_grows_and_misses_a_kidnapping():
     assert drift[-1] > drift[len(drift) // 4] > 0
     odo = OdometryDrift(
         truth[:1],
-        alphas=(0, 0, 0, 0),
-        scale_error_std=0,
-        yaw_bias_std_rad_per_m=0,
+        **NO_ODOMETRY_ERROR,
         rng=np.random.default_rng(0),
     )
     odo.kidnap(0, np.array([5.0, 1.0, 0.0]))
@@ -466,6 +494,8 @@ def test_bad_field_and_pose_are_refused():
         LikelihoodField(g, sigma_hit_m=0.0)
     with pytest.raises(ValueError, match="no free cell with clearance"):
         LikelihoodField(g, min_clearance_m=10.0)
+    with pytest.raises(ValueError, match="odometry.yaw_noise_rad_per_sqrt_m must be >= 0"):
+        OdometryDrift(np.zeros((1, 3)), yaw_noise_rad_per_sqrt_m=-1.0, rng=np.random.default_rng(0))
     with pytest.raises(ValueError, match="filter.initial_pose must be finite"):
         ParticleFilter(
             LikelihoodField(g),

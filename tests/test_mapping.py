@@ -67,7 +67,6 @@ def map_run(match: bool, *, seed: int = 0, frame_pose=None, grid_like=None):
     rng = np.random.default_rng(seed)
     odo = OdometryDrift(
         truth[:1],
-        alphas=(0.001,) * 4,
         scale_error_std=0.02,
         yaw_bias_std_rad_per_m=0.03,
         rng=np.random.default_rng(seed + 1),

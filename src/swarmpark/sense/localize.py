@@ -677,42 +677,65 @@ class ParticleFilter:
 class OdometryDrift:
     """Wheel odometry with drift, for ``n`` skids: true motion in, odometry poses out.
 
-    Each step's true increment ``(rot1, trans, rot2)`` is scaled by a fixed per-robot wheel
-    calibration error, given a heading bias per metre driven (a slightly unequal wheel radius)
-    and perturbed with Thrun's ``alpha`` noise, then integrated onto the odometry pose. The
-    odometry frame starts at the true start poses.
+    Each step's true increment ``(rot1, trans, rot2)`` is corrupted by fixed per-robot
+    errors -- a wheel-calibration scale on the distance, a heading bias per metre driven
+    (slightly unequal wheel radii) -- and by random walks whose variance grows with the
+    distance driven and the angle turned, so the drift does not depend on the step rate. It is
+    integrated onto the odometry pose, whose frame starts at the true start poses.
 
     Parameters
     ----------
     start
         ``(n, 3)`` true start poses.
-    alphas
-        ``(alpha1..alpha4)`` random noise (as in :class:`FilterConfig`).
     scale_error_std
-        Standard deviation of each robot's fixed translation scale error (e.g. 0.01 = 1 %).
+        Standard deviation of each robot's fixed distance scale error (0.01 = 1 %).
     yaw_bias_std_rad_per_m
         Standard deviation of each robot's fixed heading drift per metre driven.
+    trans_noise_m_per_sqrt_m
+        Random distance error: its standard deviation after driving ``d`` metres is this
+        times ``sqrt(d)``.
+    yaw_noise_rad_per_sqrt_m
+        Random heading error from driving, likewise per square-root metre.
+    turn_noise_rad_per_sqrt_rad
+        Random heading error from turning, per square-root radian turned.
     rng
-        Random generator (biases are drawn at construction).
+        Random generator (the fixed errors are drawn at construction).
+
+    Examples
+    --------
+    >>> odo = OdometryDrift(np.zeros((1, 3)), scale_error_std=0.0, yaw_bias_std_rad_per_m=0.0,
+    ...                     trans_noise_m_per_sqrt_m=0.0, yaw_noise_rad_per_sqrt_m=0.0,
+    ...                     turn_noise_rad_per_sqrt_rad=0.0, rng=np.random.default_rng(0))
+    >>> odo.step(np.array([[1.0, 0.0, 0.0]])).tolist()
+    [[1.0, 0.0, 0.0]]
     """
 
     def __init__(
         self,
         start: np.ndarray,
         *,
-        alphas: tuple[float, float, float, float] = (0.002, 0.002, 0.002, 0.002),
         scale_error_std: float = 0.01,
-        yaw_bias_std_rad_per_m: float = 0.01,
+        yaw_bias_std_rad_per_m: float = 0.002,
+        trans_noise_m_per_sqrt_m: float = 0.005,
+        yaw_noise_rad_per_sqrt_m: float = 0.005,
+        turn_noise_rad_per_sqrt_rad: float = 0.01,
         rng: np.random.Generator,
     ) -> None:
         start = np.asarray(start, dtype=float).reshape(-1, 3)
-        if any(a < 0 for a in alphas) or scale_error_std < 0 or yaw_bias_std_rad_per_m < 0:
-            raise ValueError(
-                "odometry: alphas, scale_error_std and yaw_bias_std_rad_per_m must be >= 0 "
-                f"(got {alphas}, {scale_error_std}, {yaw_bias_std_rad_per_m})"
-            )
+        params = {
+            "scale_error_std": scale_error_std,
+            "yaw_bias_std_rad_per_m": yaw_bias_std_rad_per_m,
+            "trans_noise_m_per_sqrt_m": trans_noise_m_per_sqrt_m,
+            "yaw_noise_rad_per_sqrt_m": yaw_noise_rad_per_sqrt_m,
+            "turn_noise_rad_per_sqrt_rad": turn_noise_rad_per_sqrt_rad,
+        }
+        for name, value in params.items():
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"odometry.{name} must be >= 0 (got {value})")
         self.rng = rng
-        self.alphas = tuple(float(a) for a in alphas)
+        self.trans_noise = float(trans_noise_m_per_sqrt_m)
+        self.yaw_noise = float(yaw_noise_rad_per_sqrt_m)
+        self.turn_noise = float(turn_noise_rad_per_sqrt_rad)
         n = len(start)
         self.scale = 1.0 + scale_error_std * rng.standard_normal(n)
         self.yaw_bias = yaw_bias_std_rad_per_m * rng.standard_normal(n)
@@ -724,19 +747,24 @@ class OdometryDrift:
         ``(n, 3)`` (a copy)."""
         true_now = np.asarray(true_now, dtype=float).reshape(self.odom.shape)
         rot1, trans, rot2 = relative_motion(self.true_prev, true_now)
-        trans = trans * self.scale
-        rot2 = rot2 + self.yaw_bias * trans
-        if any(self.alphas):
-            self.odom = _sample_odometry(self.odom, rot1, trans, rot2, self.alphas, self.rng)
-        else:
-            th = self.odom[:, 2] + rot1
-            self.odom = np.column_stack(
-                [
-                    self.odom[:, 0] + trans * np.cos(th),
-                    self.odom[:, 1] + trans * np.sin(th),
-                    wrap_angle(th + rot2),
-                ]
-            )
+        n = len(trans)
+        z = self.rng.standard_normal((n, 3))
+        turned = np.abs(rot1) + np.abs(rot2)
+        trans_o = trans * self.scale + self.trans_noise * np.sqrt(trans) * z[:, 0]
+        rot1_o = rot1 + self.turn_noise * np.sqrt(np.abs(rot1)) * z[:, 1]
+        rot2_o = (
+            rot2
+            + self.yaw_bias * trans
+            + np.hypot(self.yaw_noise * np.sqrt(trans), self.turn_noise * np.sqrt(turned)) * z[:, 2]
+        )
+        th = self.odom[:, 2] + rot1_o
+        self.odom = np.column_stack(
+            [
+                self.odom[:, 0] + trans_o * np.cos(th),
+                self.odom[:, 1] + trans_o * np.sin(th),
+                wrap_angle(th + rot2_o),
+            ]
+        )
         self.true_prev = true_now.copy()
         return self.odom.copy()
 
