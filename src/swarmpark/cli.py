@@ -162,6 +162,29 @@ def cmd_formation(args) -> int:
     return EXIT_OK
 
 
+# ----------------------------------------------------------------------------- map
+
+
+def cmd_map(args) -> int:
+    """Run a scenario while one skid builds a map with its LIDAR; save it for map_server."""
+    from .mapping_run import build_map
+    from .run import terminal_progress
+    from .scenario import ScenarioError, build_world, load_scenario
+
+    try:
+        world = build_world(load_scenario(args.scenario))
+    except ScenarioError as exc:
+        return _fail(f"{args.scenario}: {exc}")
+    if args.robot not in world.ids:
+        return _fail(f"map --robot: unknown robot {args.robot!r} (have {', '.join(world.ids)})")
+    show = sys.stderr.isatty()
+    summary = build_map(world, args.robot, args.out, progress=terminal_progress if show else None)
+    if show:
+        sys.stderr.write("\n")
+    print(json.dumps(summary, indent=2))
+    return EXIT_OK
+
+
 # ----------------------------------------------------------------------------- compare
 
 
@@ -214,6 +237,12 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--paper", action="store_true", help="reproduce the paper's figures and table")
     f.add_argument("--out", default="docs/img", metavar="DIR", help="where to write them")
     f.set_defaults(func=cmd_formation)
+
+    m = sub.add_parser("map", help="build a map with one skid's LIDAR while a scenario runs")
+    m.add_argument("scenario", help="scenario YAML file (the route is its commands)")
+    m.add_argument("--robot", required=True, help="the skid that maps")
+    m.add_argument("--out", required=True, metavar="FILE", help="map_server YAML to write")
+    m.set_defaults(func=cmd_map)
 
     c = sub.add_parser("compare", help="compare assignment costs on the scenario suite")
     c.add_argument("scenarios", nargs="*", help="scenario files (default: scenarios/*.yaml)")

@@ -196,6 +196,10 @@ class SensingSpec(_Model):
     and the run result reports the localization error. ``truth`` uses the true poses."""
 
     localization: Literal["truth", "amcl"] = "truth"
+    #: The map the skids localize and plan in (map_server YAML, e.g. one built by
+    #: ``swarmpark map``); by default the scenario's map. The simulator always uses the
+    #: scenario's map as the true world.
+    map: str | None = None
     lidar_beams: Annotated[int, Field(ge=8, le=4000)] = 1000
     lidar_range_m: PositiveFloat = 5.0
     range_noise_std_m: NonNegFloat = 0.01
@@ -257,6 +261,9 @@ def parse_scenario(data: Any, base_dir: str | Path = ".") -> Scenario:
     if scn.map.yaml is not None and not Path(scn.map.yaml).is_absolute():
         new_map = scn.map.model_copy(update={"yaml": str(Path(base_dir) / scn.map.yaml)})
         scn = scn.model_copy(update={"map": new_map})
+    if scn.sensing.map is not None and not Path(scn.sensing.map).is_absolute():
+        new_sensing = scn.sensing.model_copy(update={"map": str(Path(base_dir) / scn.sensing.map)})
+        scn = scn.model_copy(update={"sensing": new_sensing})
     return scn
 
 
@@ -325,6 +332,8 @@ class World:
     robots: tuple[RobotConfig, ...]
     static_obstacles: tuple[Polygon, ...]
     people: tuple[Person, ...]
+    #: The map the skids believe in (``sensing.map``), when it is not the true one.
+    believed_grid: OccupancyGrid | None = None
 
     @property
     def ids(self) -> list[str]:
@@ -433,7 +442,21 @@ def build_world(scn: Scenario) -> World:
     if len(set(pid)) != len(pid):
         raise ScenarioError(f"obstacles: duplicate person id in {pid}")
 
-    world = World(scn, grid, tuple(walls), tuple(robots), tuple(statics), tuple(people))
+    believed = None
+    if scn.sensing.map is not None:
+        try:
+            believed = load_map_yaml(scn.sensing.map)
+        except MapError as exc:
+            raise ScenarioError(str(exc).replace("map.yaml:", "sensing.map:", 1)) from None
+    world = World(
+        scn,
+        grid,
+        tuple(walls),
+        tuple(robots),
+        tuple(statics),
+        tuple(people),
+        believed_grid=believed,
+    )
     _check_start_poses(world)
     _check_commands(world)
     return world

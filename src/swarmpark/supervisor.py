@@ -110,7 +110,8 @@ class Supervisor:
         self.metrics = MetricsRecorder(self.ids, self.sim.poses.copy())
         # What the skids know of the world for planning: the map plus the static obstacles
         # (ground truth until onboard sensing feeds detections into the costmap).
-        self.known_grid = world.grid.with_polygons(list(world.static_obstacles))
+        base = world.believed_grid if world.believed_grid is not None else world.grid
+        self.known_grid = base.with_polygons(list(world.static_obstacles))
         self.localizer = None
         self.estimates = self.sim.poses.copy()
         self.loc_errors: list[np.ndarray] = []
@@ -536,7 +537,9 @@ class Supervisor:
         scan_seed, loc_seed = seed.spawn(2)
         self._scan_rng = np.random.default_rng(scan_seed)
         self.localizer = FleetLocalizer(
-            LikelihoodField(self.world.grid, max_range_m=cfg.lidar_range_m),
+            LikelihoodField(
+                self.world.believed_grid or self.world.grid, max_range_m=cfg.lidar_range_m
+            ),
             self.lidar_spec,
             self.sim.poses.copy(),
             rng=np.random.default_rng(loc_seed),
