@@ -59,6 +59,8 @@ class NavParams:
     avoidance: str = "monitor"
     #: Priority given to skids holding still on their goal or with no goal: they yield.
     parked_priority: float = 0.0
+    #: Every skid keeps at least this share of the avoidance (a boxed-in skid cannot yield).
+    rvo_min_share: float = 0.1
     replan_period_s: float = 3.0
     #: Paths are searched on the map coarsened to this resolution (conservatively).
     plan_resolution_m: float = 0.1
@@ -738,7 +740,7 @@ class Navigator:
             prio,
             shapes,
             dt_s=view.dt,
-            params=OrcaParams(),
+            params=OrcaParams(min_share=self.params.rvo_min_share),
             immobile=immobile,
             people_positions=view.people_xy,
             people_velocities=view.people_vel,
@@ -753,6 +755,11 @@ class Navigator:
             omega_max=view.max_yaw_rate,
         )
         out = np.column_stack([v, w])
+        # Skids making room move along their own axis only: turning in a tight formation
+        # would sweep their corners into their neighbours. They dock back afterwards.
+        h = np.column_stack([np.cos(view.poses[:, 2]), np.sin(view.poses[:, 2])])
+        along = np.clip(np.einsum("ij,ij->i", res.velocities, h), -view.max_speed, view.max_speed)
+        out[yielding] = np.column_stack([along, np.zeros(len(along))])[yielding]
         # Pure turns in place (u = 0 at the centre would drop them) pass through when ORCA
         # left the preferred velocity unchanged.
         same = np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9
