@@ -109,6 +109,10 @@ class MapperConfig:
     match_prior_weight
         Weight of a damping term that holds the solution near the odometry guess in directions
         the scan does not constrain (a long corridor).
+    match_degenerate_ratio
+        Directions of the pose in which the scan's information (eigenvalue of the Gauss-Newton
+        matrix) is below this share of the best-constrained direction are left at the
+        odometry guess.
     reference_refresh_scans
         The matcher's reference (KD-tree of the map's end points and their normals) is rebuilt
         after this many inserted scans (1 = every scan).
@@ -130,6 +134,7 @@ class MapperConfig:
     match_max_correction_m: float = 0.5
     match_max_correction_rad: float = np.radians(15.0)
     match_prior_weight: float = 1e-3
+    match_degenerate_ratio: float = 0.02
     reference_refresh_scans: int = 5
 
     def __post_init__(self) -> None:
@@ -362,8 +367,24 @@ class GridMapper:
             lam = cfg.match_prior_weight * n_ok
             prior = pose - guess
             prior[2] = wrap_angle(prior[2])
-            step = np.linalg.solve(jac.T @ jac + lam * eye3, -(jac.T @ res) - lam * prior)
-            pose = pose + step
+            hess = jac.T @ jac
+            step = np.linalg.solve(hess + lam * eye3, -(jac.T @ res) - lam * prior)
+            new = pose + step
+            # Degeneracy (Zhang, Kaess and Singh 2016): along a direction the scan hardly
+            # constrains -- the length of a wall, when it is all that is in range -- noise in
+            # the normals would move the pose at random, scan after scan. Keep the odometry
+            # guess there instead.
+            evals, evecs = np.linalg.eigh(hess)
+            weak = evals < cfg.match_degenerate_ratio * max(evals[-1], 1e-12)
+            if weak.any():
+                dev = new - guess
+                dev[2] = wrap_angle(dev[2])
+                coeff = evecs.T @ dev
+                coeff[weak] = 0.0
+                new = guess + evecs @ coeff
+                step = new - pose
+                step[2] = wrap_angle(step[2])
+            pose = new
             pose[2] = wrap_angle(pose[2])
             rms = float(np.sqrt(np.mean(res * res)))
             small = abs(step[0]) + abs(step[1]) < MATCH_CONVERGED_M and abs(step[2]) < (
