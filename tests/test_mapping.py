@@ -164,6 +164,36 @@ def test_mapping_with_drifting_odometry_needs_scan_matching():
     ] == pytest.approx(1.0, abs=0.005)
 
 
+def test_along_a_lone_wall_the_matcher_keeps_to_odometry():
+    """Only the south wall is in range: the scan fixes y and heading, not x. The degeneracy
+    test keeps x at the odometry guess (its error stays the odometry's); without it, noise in
+    the wall's normals walks x away by tens of centimetres."""
+    g = grid_from_walls(
+        (30.0, 12.0),
+        0.05,
+        [box(0, 0, 30, 0.2), box(0, 11.8, 30, 12), box(0, 0, 0.2, 12), box(29.8, 0, 30, 12)],
+    )
+    gf = prepare_grid(g)
+    route = drive([[6.0, 2.5], [24.0, 2.5]])
+    result = {}
+    for ratio in (MapperConfig().match_degenerate_ratio, 0.0):
+        rng = np.random.default_rng(1)
+        odo = OdometryDrift(route[:1], rng=np.random.default_rng(11))
+        mapper = GridMapper.like(g, spec=SPEC, config=MapperConfig(match_degenerate_ratio=ratio))
+        err = []
+        for p in route:
+            odom = odo.step(p[None])[0]
+            mapper.update(odom, scan(SPEC, p[None], gf, rng=rng)[0], initial_pose=route[0])
+            err.append(mapper.pose - p)
+        result[ratio] = np.abs(np.array(err)).max(axis=0)
+    odometry_x_error = abs(odom[0] - route[-1, 0])
+    aware, naive = result[MapperConfig().match_degenerate_ratio], result[0.0]
+    assert aware[0] < odometry_x_error + 0.02
+    assert aware[1] < 0.03  # across the wall the scan holds it
+    assert naive[0] > 0.2
+    assert naive[0] > 5 * aware[0]
+
+
 def test_second_skid_localizes_in_the_first_skids_frame(tmp_path):
     """Hing 2018, Sect. 3.5.2: skid A maps from scratch in its own frame (its start pose is
     the origin); the map is saved and loaded as map_server YAML; skid B, started somewhere
