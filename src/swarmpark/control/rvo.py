@@ -88,6 +88,8 @@ MIN_EDGE_M = 1e-12
 SAFETY_HALVINGS = 4
 #: Above this many edge pairs, the Minkowski merge sorts instead of counting ranks.
 SMALL_MERGE = 64
+#: Pairs per block in the vectorized kernels (``(V, block)`` arrays that fit in cache).
+PAIR_CHUNK = 4096
 #: Sides of the regular polygon that covers a person's disc (circumscribed: conservative).
 DEFAULT_DISC_SIDES = 8
 
@@ -491,6 +493,19 @@ def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0):
     ux = np.where(inside, -s_in * nix, bx - wx)
     uy = np.where(inside, -s_in * niy, by - wy)
     return ux, uy, np.where(inside, nix, nox), np.where(inside, niy, noy), inside
+
+
+def _in_chunks(fn, n_out: int, size: int, vertex_major: tuple, per_pair: tuple, *extra):
+    """Call ``fn`` on blocks of pairs so the ``(V, block)`` temporaries stay in cache."""
+    if size <= PAIR_CHUNK:
+        return fn(*vertex_major, *per_pair, *extra)
+    outs = [[] for _ in range(n_out)]
+    for lo in range(0, size, PAIR_CHUNK):
+        sl = slice(lo, lo + PAIR_CHUNK)
+        res = fn(*(a[:, sl] for a in vertex_major), *(a[sl] for a in per_pair), *extra)
+        for k in range(n_out):
+            outs[k].append(res[k])
+    return tuple(np.concatenate(o, axis=-1) for o in outs)
 
 
 def pair_halfplanes(
@@ -1125,30 +1140,34 @@ def orca_step(
     # Static obstacles: hard constraints, full share, their own horizon.
     n_hard = 0
     obstacle_pairs = None
-    if obstacles is not None and len(obstacles) and params.max_obstacles and n:
-        rng = params.time_horizon_obst_s * speed + reach
+    if obstacles is not None and len(obstacles) and n:
+        step_reach = reach + vmax * dt_s
+        rng = np.maximum(params.time_horizon_obst_s * speed + reach, step_reach)
         ia, io = obstacles.tree.query(shapely.points(pos), predicate="dwithin", distance=rng)
         if ia.size:
             dist = shapely.distance(shapely.points(pos[ia]), obstacles.tree.geometries[io])
             order, rank = _rank_in_group(ia, dist)
-            keep = rank < params.max_obstacles
-            ia, io, rank = ia[order][keep], io[order][keep], rank[keep]
+            ia, io, dist = ia[order], io[order], dist[order]
             region = minkowski_difference(obstacles.vertices[io] - pos[ia, None], shp[ia])
-            pt, dr = pair_halfplanes(
-                region,
-                vel[ia],
-                vel[ia],
-                np.ones(ia.size),
-                np.full(ia.size, 1.0 / params.time_horizon_obst_s),
-                inv_dt,
-            )
-            n_hard = int(rank.max()) + 1
+            # The nearest few constrain ORCA; the safety filter checks all within one step.
+            keep = rank < params.max_obstacles
+            if keep.any():
+                pt, dr = pair_halfplanes(
+                    region[keep],
+                    vel[ia[keep]],
+                    vel[ia[keep]],
+                    np.ones(int(keep.sum())),
+                    np.full(int(keep.sum()), 1.0 / params.time_horizon_obst_s),
+                    inv_dt,
+                )
+                n_hard = int(rank[keep].max()) + 1
+                blocks.append(_scatter(n, n_hard, ia[keep], rank[keep], pt, dr))
+            near = dist <= step_reach[ia]
             obstacle_pairs = (
-                ia,
-                np.ascontiguousarray(region[..., 0].T),
-                np.ascontiguousarray(region[..., 1].T),
+                ia[near],
+                np.ascontiguousarray(region[near, :, 0].T),
+                np.ascontiguousarray(region[near, :, 1].T),
             )
-            blocks.append(_scatter(n, n_hard, ia, rank, pt, dr))
 
     # People: moving discs, full share.
     if people_positions is not None and params.max_people and n:
@@ -1236,7 +1255,9 @@ def orca_step(
             lo, hi = np.where(swap, hi, lo), np.where(swap, lo, hi)
             # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
             sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
-            rx, ry = _minkowski_xy(sx[:, hi], sy[:, hi], sx[:, lo], sy[:, lo])
+            rx, ry = _in_chunks(
+                _minkowski_xy, 2, lo.size, (sx[:, hi], sy[:, hi], sx[:, lo], sy[:, lo]), ()
+            )
             rx += pos[hi, 0] - pos[lo, 0]
             ry += pos[hi, 1] - pos[lo, 1]
             if params.safety_filter:
@@ -1245,12 +1266,16 @@ def orca_step(
             if rows.size:
                 used, pair_of = np.unique(inverse[:n_orca], return_inverse=True)
                 a, b = lo[used], hi[used]
-                ux, uy, nx, ny, inside = _vo_projection(
-                    rx[:, used],
-                    ry[:, used],
-                    vel[a, 0] - vel[b, 0],
-                    vel[a, 1] - vel[b, 1],
-                    np.full(used.size, 1.0 / params.time_horizon_s),
+                ux, uy, nx, ny, inside = _in_chunks(
+                    _vo_projection,
+                    5,
+                    used.size,
+                    (rx[:, used], ry[:, used]),
+                    (
+                        vel[a, 0] - vel[b, 0],
+                        vel[a, 1] - vel[b, 1],
+                        np.full(used.size, 1.0 / params.time_horizon_s),
+                    ),
                     inv_dt,
                     params.leg_preference,
                 )
