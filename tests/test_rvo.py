@@ -400,6 +400,28 @@ def test_wall_is_a_hard_obstacle_and_is_never_crossed():
     assert corners[0, :, 0].max() > 2.8 and vel[0, 1] > 0.1
 
 
+def test_a_wall_of_many_small_pieces_is_never_entered():
+    """A wall of 24 small cells: ORCA sees the nearest few, and even with none of them as
+    constraints (``max_obstacles=0``) the safety filter stops the robot at the wall."""
+    cells = [
+        np.array([[x, 2.0], [x + 0.25, 2.0], [x + 0.25, 2.25], [x, 2.25]])
+        for x in np.arange(-3.0, 3.0, 0.25)
+    ]
+    walls = prepare_obstacles(cells)
+    shape = skid(math.pi / 2)[None]
+    for max_obstacles in (2, 0):
+        dt, pos, vel = 0.25, np.array([[0.0, 0.0]]), np.zeros((1, 2))
+        params = OrcaParams(max_obstacles=max_obstacles)
+        for _ in range(40):
+            pref = np.array([[0.3, 1.0]])  # obliquely into the wall
+            vel = orca_step(
+                pos, vel, pref, 1.0, 1.0, shape, dt_s=dt, obstacles=walls, params=params
+            ).velocities
+            pos = pos + vel * dt
+            assert (pos[0] + shape[0])[:, 1].max() <= 2.0 + 1e-9
+        assert (pos[0] + shape[0])[:, 1].max() > 1.8  # it did come close
+
+
 def test_immobile_robot_gets_zero_and_the_other_avoids_it_alone():
     pos = np.array([[0.0, 0.0], [2.5, 0.0]])
     vel = np.array([[1.0, 0.0], [0.3, 0.0]])

@@ -9,14 +9,28 @@ n-body collision avoidance", ISRR 2011), with these changes for swarmpark (hing2
   one circumscribed circle, so skids parked side by side 0.2 m apart are not "in collision".
 * **Priorities.** Robot ``i`` takes the share ``w_ij = p_j / (p_i + p_j)`` of the avoidance
   against robot ``j`` (clipped to ``[min_share, 1 - min_share]``), so the higher priority takes
-  the smaller share and ``w_ij + w_ji = 1`` keeps the reciprocal guarantee. Policy: priority
-  ``0`` is allowed and means "yield fully" (a parked skid against a passing one); two
-  priority-0 robots split evenly. A robot flagged ``immobile`` (e-stopped, broken) is given
-  velocity zero and every other robot takes the full share against it.
+  the smaller share and ``w_ij + w_ji = 1`` keeps the reciprocal guarantee. When the pair is
+  not on a collision course, ORCA's ``u`` is room to approach rather than avoidance to do,
+  and the shares swap (``1 - w_ij``): the higher priority gets most of the room. Policy:
+  priority ``0`` is allowed and means "yield fully" (a parked skid against a passing one);
+  two priority-0 robots split evenly. A robot flagged ``immobile`` (e-stopped, broken) is
+  given velocity zero and every other robot takes the full share against it.
+* **Head-on with flat faces.** The nearest boundary point of a polygonal velocity obstacle
+  is often on its flat cut-off face, which only brakes: two rectangles meeting head-on would
+  push each other back instead of passing. Any boundary point keeps ORCA's guarantee, so a
+  leg of the cone is used when it is nearly as close (``OrcaParams.leg_preference``); exact
+  ties keep right.
 * **Non-reciprocal obstacles.** People are moving discs (approximated by circumscribed
-  regular polygons, a conservative cover); the robot takes the full share. Walls and static
-  obstacles are convex polygons or segments with their own time horizon; their constraints
-  are hard (never relaxed by the 3-D fallback), as the obstacle lines of RVO2.
+  regular polygons, a conservative cover); the robot takes the full share, on the tangent of
+  their velocity obstacle nearest its preferred velocity (a person does not react, so any
+  tangent is safe, and this one steps aside instead of backing off in front of them). Walls
+  and static obstacles are convex polygons or segments with their own time horizon; their
+  constraints are hard (never relaxed by the 3-D fallback), as the obstacle lines of RVO2.
+* **A one-step safety filter.** Where the half-planes are infeasible (a squeeze), the 3-D
+  fallback violates some of them and ORCA guarantees nothing. After the decision every pair
+  of robots, and robot and static obstacle, that could touch within the step is checked
+  exactly for overlap along the straight moves; robots in such a pair are slowed (halved,
+  finally stopped) until none is left (``OrcaParams.safety_filter``).
 * **Non-holonomic skids: the effective-centre method** (Snape et al., "Smooth and
   collision-free navigation for multiple robots under differential-drive constraints",
   IROS 2010; a feedback linearization). The point ``E`` at distance ``D`` ahead of the pivot
@@ -29,12 +43,16 @@ n-body collision avoidance", ISRR 2011), with these changes for swarmpark (hing2
   footprint translated by ``u * dt`` (``rho`` = farthest footprint point from ``E``): the
   first term is the arc of ``E``, the second the turn of the body about ``E``
   (:func:`tracking_error_bound`). The footprints passed to ORCA are enlarged by ``e``
-  (:func:`skid_shapes`), so the per-step ORCA guarantee holds for the real skids.
+  (:func:`skid_shapes`), so the per-step ORCA guarantee holds for the real skids. The bound
+  grows with ``rho * omega_max * dt``: put ``E`` at the middle of the footprint and run the
+  decision at 10-20 Hz (at 20 Hz a 1.25 m x 0.75 m skid turning at 1.5 rad/s needs 5.6 cm).
 
 The half-planes are built vectorized over all neighbour pairs (neighbours from a
 ``scipy.spatial.cKDTree``, limited to the ``max_neighbours`` nearest within a cut-off), and
 the small linear programs (RVO2's ``linearProgram1/2/3``) run vectorized across robots: one
-Python iteration per constraint slot, not per robot.
+Python iteration per constraint slot, not per robot. Each unordered pair is built once, from
+the side of the robot with the smaller ``(x, y)``, so the result is bit-for-bit the same
+whatever the order of the robots.
 
 Typical call, once per tick (see :func:`orca_step` for all arguments)::
 
@@ -94,7 +112,7 @@ PAIR_CHUNK = 4096
 DEFAULT_DISC_SIDES = 8
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class OrcaParams:
     """Tuning of :func:`orca_step` (keyword-only, validated).
 
@@ -121,7 +139,8 @@ class OrcaParams:
         Sides of the circumscribed polygon used for people's discs.
     slowest_fallback
         Where the half-planes are infeasible, take the slowest of the velocities that violate
-        them least (``False``: RVO2's choice, an arbitrary extreme point of that set).
+        them least (``False``, the default: RVO2's choice, an extreme point of that set). It
+        brakes harder in a squeeze but deadlocks crowds more often (circle benchmark).
     leg_preference
         Robots with flat faces meeting head-on: ORCA's nearest boundary point of the
         velocity obstacle is on the flat cut-off face, which only brakes (discs pass each
@@ -747,8 +766,8 @@ def solve_velocity_lp(
 
 def _slowest_least_violation(hp: HalfPlanes, rows, radius, result) -> None:
     """Among the velocities whose largest soft violation equals the one found by the 3-D
-    program, take the slowest. RVO2 keeps an arbitrary extreme point of that set, which in a
-    symmetric squeeze can be full speed into the squeeze; stopping is the safe choice."""
+    program, take the slowest. RVO2 keeps an extreme point of that set, which in a symmetric
+    squeeze can be full speed into the squeeze."""
     p, d, v = hp.point[rows], hp.direction[rows], hp.valid[rows]
     viol = np.where(v, _det(d, p - result[rows][:, None]), -np.inf)
     soft = np.arange(v.shape[1]) >= hp.n_hard
