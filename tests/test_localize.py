@@ -12,6 +12,7 @@ from swarmpark.geometry import Footprint, footprint_corners, wrap_angle
 from swarmpark.gridmap import OccupancyGrid, grid_from_walls
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.localize import (
+    RECOVERY,
     FilterConfig,
     FleetLocalizer,
     LikelihoodField,
@@ -202,7 +203,7 @@ def _run(seed: int):
     gf = prepare_grid(g)
     rng = np.random.default_rng(seed)
     odo = OdometryDrift(truth[:1], rng=np.random.default_rng(seed + 1))
-    pf = ParticleFilter(field, spec, rng=np.random.default_rng(seed + 2))  # uniform start
+    pf = ParticleFilter(field, spec, config=RECOVERY, rng=np.random.default_rng(seed + 2))
     prev = truth[0]
     errors, yaw_errors, counts = [], [], []
     for i, pose in enumerate(truth):
@@ -247,7 +248,7 @@ def test_without_injection_a_kidnapped_skid_stays_lost():
     """The control case for the test above: augmented MCL is what brings the skid back."""
     g = asymmetric_room()
     spec = LidarSpec(range_noise_std_m=0.01)
-    cfg = FilterConfig(alpha_fast=0.0)
+    cfg = FilterConfig()  # recovery off
     a, b = drive(ROUTE_A), drive(ROUTE_B)
     pf = ParticleFilter(
         LikelihoodField(g, min_clearance_m=0.3),
@@ -427,9 +428,9 @@ def test_unmapped_obstacles_hiding_the_walls_look_like_a_kidnapping_unless_known
     the view, the fit drops as after a kidnapping, recovery injects particles where the scan
     happens to fit walls, and the estimate jumps. Masking the obstacles (their places are
     known to the fleet) or turning recovery off keeps the skid tracking."""
-    assert _row_run(FilterConfig(), known=False)["max_m"] > 1.0
-    assert _row_run(FilterConfig(), known=True)["max_m"] < 0.1
-    assert _row_run(FilterConfig(alpha_fast=0.0), known=False)["max_m"] < 0.1
+    assert _row_run(RECOVERY, known=False)["max_m"] > 1.0
+    assert _row_run(RECOVERY, known=True)["max_m"] < 0.1
+    assert _row_run(FilterConfig(), known=False)["max_m"] < 0.1  # recovery off (default)
 
 
 def test_beams_hitting_a_known_neighbour_are_masked():
