@@ -314,9 +314,12 @@ def _pseudo_angle(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.where(y >= 0, 1.0 - r, 3.0 + r)
 
 
-def _cyclic_next(a: np.ndarray) -> np.ndarray:
-    """The next vertex along axis 0 (vertex-major layout ``(V, P)``)."""
-    return np.concatenate([a[1:], a[:1]], axis=0)
+def _edges(a: np.ndarray) -> np.ndarray:
+    """Edge vectors ``next vertex - vertex`` along axis 0 (vertex-major layout ``(V, P)``)."""
+    e = np.empty_like(a)
+    np.subtract(a[1:], a[:-1], out=e[:-1])
+    np.subtract(a[0], a[-1], out=e[-1])
+    return e
 
 
 def _arg_extreme(a: np.ndarray, largest: bool) -> np.ndarray:
@@ -338,8 +341,8 @@ def _minkowski_xy(bx, by, ax, ay):
     rank within its own polygon plus the number of the other polygon's edges before it.
     """
     nax, nay = -ax, -ay  # a point reflection keeps counter-clockwise order
-    ebx, eby = _cyclic_next(bx) - bx, _cyclic_next(by) - by
-    eax, eay = _cyclic_next(nax) - nax, _cyclic_next(nay) - nay
+    ebx, eby = _edges(bx), _edges(by)
+    eax, eay = _edges(nax), _edges(nay)
     # Zero-length edges (padding) go last and add nothing to the walk.
     ang_b = np.where(np.abs(ebx) + np.abs(eby) > MIN_EDGE_M, _pseudo_angle(ebx, eby), np.inf)
     ang_a = np.where(np.abs(eax) + np.abs(eay) > MIN_EDGE_M, _pseudo_angle(eax, eay), np.inf)
@@ -437,7 +440,7 @@ def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0):
     Returns ``ux, uy, nx, ny`` ``(P,)``.
     """
     cols = np.arange(rx.shape[1])
-    ex, ey = _cyclic_next(rx) - rx, _cyclic_next(ry) - ry
+    ex, ey = _edges(rx), _edges(ry)
     elen = np.sqrt(ex * ex + ey * ey)
     real = elen > MIN_EDGE_M
     inv_len = 1.0 / np.maximum(elen, MIN_EDGE_M)
@@ -452,7 +455,7 @@ def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0):
     esx, esy = ex * inv, ey * inv
 
     # Legs of the cone: rays from the origin through the extreme vertices seen from it.
-    cx, cy = rx.mean(axis=0), ry.mean(axis=0)
+    cx, cy = rx.sum(axis=0), ry.sum(axis=0)  # a multiple of the centroid: same directions
     key = _pseudo_angle(cx * rx + cy * ry, cx * ry - cy * rx)
     # Angles relative to the centroid lie in (-pi, pi): shift so that the order is monotone.
     key = np.where(key >= 2.0, key - 4.0, key)
@@ -1001,7 +1004,7 @@ def _scatter(n: int, m: int, rows, slots, point, direction):
 def _edge_planes(rx: np.ndarray, ry: np.ndarray):
     """Edge lines of convex regions ``(V, P)``: unit outward normals ``n`` and offsets ``c``
     (interior: ``n · x < c`` for every real edge), and the mask of real edges."""
-    ex, ey = _cyclic_next(rx) - rx, _cyclic_next(ry) - ry
+    ex, ey = _edges(rx), _edges(ry)
     elen = np.sqrt(ex * ex + ey * ey)
     real = elen > MIN_EDGE_M
     inv_len = 1.0 / np.maximum(elen, MIN_EDGE_M)
