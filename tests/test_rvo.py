@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 
 from swarmpark.control.rvo import (
@@ -195,6 +196,30 @@ def test_lp_hand_checked_cases():
     hp3 = HalfPlanes(hp2.point, hp2.direction, hp2.valid, n_hard=1)
     v, _ = solve_velocity_lp(hp3, np.array([[0.0, 0.0]]), np.array([2.0]))
     assert v[0, 0] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_infeasible_programs_minimise_the_largest_soft_violation_and_keep_hard_lines():
+    """The 3-D fallback against scipy's linprog (speed circle as a 256-gon)."""
+    rng = np.random.default_rng(2)
+    b_count, m, hard = 60, 7, 2
+    ang = rng.uniform(0, 2 * np.pi, (b_count, m))
+    d = np.stack([np.cos(ang), np.sin(ang)], -1)
+    left = np.stack([-d[..., 1], d[..., 0]], -1)
+    p = rng.uniform(-1.5, 1.5, (b_count, m, 2))
+    p[:, :hard] = -0.3 * left[:, :hard]  # hard lines that the zero velocity keeps
+    hp = HalfPlanes(p, d, np.ones((b_count, m), bool), hard)
+    v, bad = solve_velocity_lp(hp, rng.uniform(-1, 1, (b_count, 2)), np.ones(b_count))
+    th = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    assert bad.sum() > 20
+    for k in np.flatnonzero(bad):
+        slack = -np.einsum("md,md->m", left[k], v[k] - p[k])  # > 0: violated by that much
+        assert slack[:hard].max() <= 1e-9
+        a_ub = [[-left[k, j, 0], -left[k, j, 1], 0.0 if j < hard else -1.0] for j in range(m)]
+        b_ub = [-left[k, j] @ p[k, j] for j in range(m)]
+        a_ub += [[math.cos(t), math.sin(t), 0.0] for t in th]
+        b_ub += [1.0] * len(th)
+        best = linprog([0, 0, 1], A_ub=a_ub, b_ub=b_ub, bounds=[(None, None)] * 3).x[2]
+        assert slack[hard:].max() <= best + 1e-3
 
 
 @st.composite

@@ -694,7 +694,7 @@ def _lp3(point, direction, valid, n_hard, fail, radius, result):
             continue
         r = rows_all[sel]
         pi, di = point[r, i], direction[r, i]
-        lo = min(n_hard, i)
+        lo = n_hard  # the hard lines always hold, as in RVO2
         pj, dj = point[r, n_hard:i], direction[r, n_hard:i]
         d_ij = _det(di[:, None], dj)
         parallel = np.abs(d_ij) <= LP_EPSILON
