@@ -28,7 +28,7 @@ __all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
 
 ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
 #: Beams of each scan scored by the particle filter (a subsample, as AMCL's max_beams).
-AMCL_BEAMS = 120
+AMCL_BEAMS = 240
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
 BLOCKING_CROP_M = 3.0

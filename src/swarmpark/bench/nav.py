@@ -37,7 +37,7 @@ def bench_plan(quick: bool) -> list[dict]:
     grid = grid_from_walls((20, 20), 0.05, walls)
     start, goal = np.array([1.0, 1.0]), np.array([19.0, 19.0])
     rows = []
-    for label, res in (("5 cm (native)", None), ("10 cm (navigator)", 0.1)):
+    for label, res in (("5 cm (native, default)", None), ("10 cm (plan_resolution_m)", 0.1)):
         cm = build_costmap(grid, 0.4, 0.72, resolution_m=res)
         stats = time_call(lambda cm=cm: plan_path(cm, start, goal), repeat=3 if quick else 20)
         path = plan_path(cm, start, goal)

@@ -62,8 +62,10 @@ class NavParams:
     #: Every skid keeps at least this share of the avoidance (a boxed-in skid cannot yield).
     rvo_min_share: float = 0.1
     replan_period_s: float = 3.0
-    #: Paths are searched on the map coarsened to this resolution (conservatively).
-    plan_resolution_m: float = 0.1
+    #: Paths are searched on the map coarsened to this resolution (conservatively); None
+    #: searches at the map's own resolution. Coarser plans are faster (see the nav.plan
+    #: benchmark) but narrow the passages by up to a cell, which costs time in tight spaces.
+    plan_resolution_m: float | None = None
     #: Collision monitor: look this far ahead in time, at these fractions of the command.
     monitor_horizon_s: float = 1.0
     monitor_samples: int = 5
