@@ -227,3 +227,49 @@ def bench_mapping(quick: bool) -> list[dict]:
             }
         )
     return rows
+
+
+@register(
+    "sense.costmap",
+    "obstacle layer update for a fleet (unexplained points, clearing by passing beams, decay)",
+    target="a few ms per step at 50 skids",
+)
+def bench_costmap(quick: bool) -> list[dict]:
+    from ..sense.costmap import LocalCostmap
+    from ..sense.lidar import LidarSpec, prepare_grid, scan
+
+    grid = _hangar()
+    field = prepare_grid(grid)
+    spec = LidarSpec(range_noise_std_m=0.01)
+    rng = np.random.default_rng(6)
+    rows = []
+    for n in (10, 50) if not quick else (50,):
+        poses, polys = _fleet(n, rng)
+        people = np.column_stack([rng.uniform(5, 35, 5), rng.uniform(8, 22, 5)])
+        ranges = scan(
+            spec,
+            poses,
+            field,
+            polygons=polys,
+            polygon_owner=np.arange(n),
+            discs=people,
+            disc_radii=np.full(5, 0.25),
+            rng=rng,
+        )
+        cm = LocalCostmap(grid, n, spec)
+        clock = iter(np.arange(0.0, 1e6, 0.05))
+        cm.update(next(clock), poses, ranges)  # marked cells exist before timing
+
+        def step(cm=cm, clock=clock, poses=poses, ranges=ranges):
+            cm.update(next(clock), poses, ranges)
+
+        stats = time_call(step, repeat=3 if quick else 10)
+        rows.append(
+            {
+                "case": f"{n} skids x {spec.num_beams} beams",
+                **stats,
+                "marked_cells": int(len(cm._keys)),
+                "meets_target": bool(stats["median_ms"] < 10.0),
+            }
+        )
+    return rows
