@@ -724,7 +724,7 @@ def solve_velocity_lp(
     pref_velocities: np.ndarray,
     max_speeds: np.ndarray,
     *,
-    slowest_fallback: bool = True,
+    slowest_fallback: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The velocity closest to the preferred one in all half-planes and the speed circle.
 
