@@ -566,7 +566,9 @@ class Supervisor:
             disc_radii=sim.person_radius,
             rng=self._scan_rng,
         )
-        self.estimates = self.localizer.step(sim.poses, ranges).copy()
+        # Static obstacles are known but not in the map: their beams are not scored.
+        known = self._obstacle_tris if len(self._obstacle_tris) else None
+        self.estimates = self.localizer.step(sim.poses, ranges, known_polygons=known).copy()
         self.loc_errors.append(self.localizer.errors(sim.poses)[0])
 
     def localization_summary(self) -> dict:
