@@ -88,7 +88,14 @@ paused = np.zeros(n, bool)
 for k in range(int(round(seconds / sim.dt))):
     step = sim.step(jiggle(n, k))
     metrics.on_step(sim.t, sim.poses, sim.vel, goals, has, paused, step, 0.0)
-print(json.dumps({"max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+# ru_maxrss survives execve on Linux (it would report the parent's peak at fork): read the
+# peak of this process's own address space instead.
+try:
+    with open("/proc/self/status") as f:
+        hwm_kb = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
+except OSError:
+    hwm_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(json.dumps({"max_rss_mb": hwm_kb / 1024}))
 """
 
 
