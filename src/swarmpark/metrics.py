@@ -32,6 +32,8 @@ DEADLOCK_WINDOW_S = 10.0
 PROGRESS_M = 0.05
 #: Heading error counts toward the remaining distance at this lever arm (m per rad).
 HEADING_LEVER_M = 0.5
+#: Above this many goals the lower bound uses straight-line distances (no Dijkstra runs).
+LOWER_BOUND_PATH_GOALS = 30
 #: Largest ratio of an 8-connected grid path length to the Euclidean length it stands for.
 OCTILE_RATIO = float(np.hypot(1.0, np.sqrt(2.0) - 1.0))
 
@@ -226,6 +228,13 @@ def lower_bound_s(
     """
     starts = np.asarray(starts, float).reshape(-1, 3)
     goals = np.asarray(goals, float).reshape(-1, 3)
+    if len(goals) > LOWER_BOUND_PATH_GOALS:
+        # One Dijkstra per goal gets expensive for big groups; straight lines are a bound too.
+        straight = np.linalg.norm(starts[:, None, :2] - goals[None, :, :2], axis=-1)
+        try:
+            return bottleneck_assignment(straight / np.asarray(max_speed_mps, float)[:, None])[1]
+        except AssignmentError:
+            return None
     # Rasterized walls are conservative by up to a cell, and cell-centre tests by another half:
     # inflate by less so the grid's free space contains the true one.
     radius = max(inscribed_m - 2.0 * grid.resolution_m, 0.0)

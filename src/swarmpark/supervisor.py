@@ -31,6 +31,7 @@ ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "st
 AMCL_BEAMS = 240
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
+BLOCKING_MAX_GOALS = 40
 BLOCKING_CROP_M = 3.0
 #: A formation group keeps tracking its plan this long after the plan ends, then the
 #: navigation stack docks each skid exactly.
@@ -290,7 +291,8 @@ class Supervisor:
         from .geometry import footprint_polygon
 
         n = len(goals)
-        if n < 2:
+        if n < 2 or n > BLOCKING_MAX_GOALS:
+            # The pairwise test is quadratic: big groups go without fill-order holds.
             return tuple(() for _ in goals)
         half = max(f.width_m for f in fps) / 2
         grid = self.known_grid

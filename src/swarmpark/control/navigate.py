@@ -62,6 +62,8 @@ class NavParams:
     #: Every skid keeps at least this share of the avoidance (a boxed-in skid cannot yield).
     rvo_min_share: float = 0.1
     replan_period_s: float = 3.0
+    #: At most this many paths are planned in one tick.
+    max_plans_per_tick: int = 8
     #: Paths are searched on the map coarsened to this resolution (conservatively); None
     #: searches at the map's own resolution. Coarser plans are faster (see the nav.plan
     #: benchmark) but narrow the passages by up to a cell, which costs time in tight spaces.
@@ -174,13 +176,20 @@ class Navigator:
 
     def _update_plans(self, view: ControlView) -> None:
         p = self.params
+        wanted = []
         for i in np.flatnonzero(view.active):
             nav = self._robots[i]
             goal = view.goals[i]
             stale = nav.path_goal is None or np.any(np.abs(nav.path_goal - goal) > 1e-9)
             due = view.t - nav.planned_t >= p.replan_period_s
-            if not (stale or view.goal_changed[i] or (due and nav.failed)):
-                continue
+            if stale or view.goal_changed[i] or (due and nav.failed):
+                wanted.append(i)
+        # A bounded number of plans per tick (longest waiting first), so a park command for a
+        # hundred skids does not stall the loop; the others wait for their path.
+        wanted.sort(key=lambda i: (self._robots[i].planned_t, i))
+        for i in wanted[: p.max_plans_per_tick]:
+            nav = self._robots[i]
+            goal = view.goals[i]
             cm = self._costmap(view, view.footprints[i])
             path = self._plan_with_staging(cm, view.poses[i], goal)
             nav.path, nav.path_goal, nav.planned_t = path, goal.copy(), view.t
@@ -299,6 +308,14 @@ class Navigator:
         half_w = np.array([fps[i].width_m / 2 for i in idx])
         poses = view.poses[idx]
         targets, final = self._targets(view, idx)
+        # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
+        waiting = np.array(
+            [
+                self._robots[i].path_goal is None
+                or bool(np.any(np.abs(self._robots[i].path_goal - view.goals[i]) > 1e-9))
+                for i in idx
+            ]
+        )
 
         # Which end leads: fixed along a path; by the shorter arc (with hysteresis) at the end.
         reverse = np.array([self._robots[i].reverse for i in idx])
@@ -348,7 +365,8 @@ class Navigator:
         raw[:, 0] = np.clip(raw[:, 0], -view.max_speed[idx], view.max_speed[idx])
         raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
         # At the goal position, only turn to the goal heading.
-        raw = self._dock(view, idx, raw, targets, final)
+        raw[waiting] = 0.0
+        raw = self._dock(view, idx, raw, targets, final & ~waiting)
         if p.avoidance == "rvo":
             full = np.zeros((n, 2))
             full[idx] = raw
