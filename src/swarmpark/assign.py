@@ -52,8 +52,8 @@ def cost_matrix(
     --------
     >>> r = np.array([[0.0, 0.0], [0.0, 1.0]])
     >>> g = np.array([[5.0, 1.0], [5.0, 0.0]])
-    >>> cost_matrix(r, g, "formation").round(2).tolist()
-    [[5.1, 5.0], [5.0, 5.1]]
+    >>> cost_matrix(r, g, "formation").round(2).tolist()  # the shapes match crosswise
+    [[1.05, 0.05], [0.05, 1.05]]
     """
     robot_xy = np.asarray(robot_xy, float).reshape(-1, 2)
     goal_xy = np.asarray(goal_xy, float).reshape(-1, 2)
