@@ -169,6 +169,26 @@ def _solve(region: Region, skids: Skids, method: str) -> tuple[np.ndarray, dict]
     return convex.solve(region, skids)
 
 
+def _finish_checked(boundary_world, region, skids, centres, method, info, opening):
+    """:func:`_finish`, falling back to stacking when a convex solution fails validation.
+
+    The convex program keeps its constraints only within solver tolerance, and on some
+    non-convex boundaries (split into pieces) a footprint can end up outside by more than the
+    validation allows. An operator is then better served by the stacking layout, with a
+    notice, than by a refusal.
+    """
+    try:
+        return _finish(boundary_world, region, skids, centres, method, info, opening)
+    except LayoutError as exc:
+        if method != "convex" or exc.fits is not None:
+            raise
+        centres, fallback = _solve(region, skids, "stacking")
+        fallback["notices"] = [f"convex: {exc}; used the stacking layout instead"] + fallback.get(
+            "notices", []
+        )
+        return _finish(boundary_world, region, skids, centres, "stacking", fallback, opening)
+
+
 def _finish(
     boundary_world,
     region: Region,
@@ -291,7 +311,7 @@ def layout(
     if h is not None:
         region = make_region(boundary, obstacles, h, margin_m)
         centres, info = _solve(region, skids, method)
-        return _finish(boundary, region, skids, centres, method, info, opening)
+        return _finish_checked(boundary, region, skids, centres, method, info, opening)
 
     cands = candidate_headings(boundary)
     scored = []
@@ -324,7 +344,7 @@ def layout(
                 f"heading auto: {len(skids)} skids did not fit at {tried} deg; "
                 f"used {math.degrees(region.heading):g} deg"
             )
-        return _finish(boundary, region, skids, centres, method, info, opening)
+        return _finish_checked(boundary, region, skids, centres, method, info, opening)
     assert last_error is not None
     raise last_error
 
@@ -394,6 +414,6 @@ def capacity(
         if len(centres) == 0:
             return _empty(method, region, ["convex: not even one skid fits"])
         skids = make_skids([footprint] * len(centres))
-    result = _finish(boundary, region, skids, centres, method, info, opening)
+    result = _finish_checked(boundary, region, skids, centres, method, info, opening)
     result.report["capacity"] = len(result.poses)
     return result
