@@ -108,7 +108,6 @@ class MetricsRecorder:
         has_goal: np.ndarray,
         paused: np.ndarray,
         step,
-        tick_ms: float | None = None,
     ) -> None:
         """Record the state after one step (``paused``: stopped or e-stopped robots)."""
         self.path_length += np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
@@ -124,8 +123,6 @@ class MetricsRecorder:
             self.min_clearance_static = min(
                 self.min_clearance_static, float(step.clearance_static_m.min())
             )
-        if tick_ms is not None:
-            self.tick_ms.append(tick_ms)
 
         # Parking: when did each robot last enter its tolerance.
         pos_err, head_err = goal_errors(poses, np.where(has_goal[:, None], goals, poses))

@@ -23,6 +23,7 @@ from .geometry import (
     body_corners,
     convex_gap,
     footprint_corners,
+    pad_polygons,
     triangulate,
 )
 from .gridmap import MapError, OccupancyGrid, grid_from_walls, load_map_yaml
@@ -371,8 +372,6 @@ class World:
         ):
             pieces.append(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float))
             owners.append("wall")
-        from .geometry import pad_polygons
-
         return pad_polygons(pieces, 4), owners
 
 

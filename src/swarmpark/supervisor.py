@@ -661,7 +661,7 @@ class Supervisor:
             dtype=bool,
         )
 
-    def tick(self, tick_ms: float | None = None):
+    def tick(self):
         """One decision phase for every robot from one snapshot, then one move phase."""
         self._run_due_commands()
         self._reassign()
@@ -697,7 +697,6 @@ class Supervisor:
             self.has_goal,
             paused,
             step,
-            tick_ms,
         )
         return step
 

@@ -1,4 +1,4 @@
-"""What a controller sees each tick, and the placeholder go-to-pose law.
+"""What a controller sees each tick, and the controller interface.
 
 A controller maps one :class:`ControlView` (a snapshot of the swarm taken before anyone moves)
 to commanded ``(v, omega)`` for every skid: the decision phase of a two-phase tick, so results
@@ -12,10 +12,10 @@ from typing import Protocol
 
 import numpy as np
 
-from ..geometry import Footprint, wrap_angle
+from ..geometry import Footprint
 from ..gridmap import OccupancyGrid
 
-__all__ = ["ControlView", "Controller", "GoToPoseController"]
+__all__ = ["ControlView", "Controller"]
 
 
 @dataclass(frozen=True)
@@ -46,36 +46,3 @@ class Controller(Protocol):
     def compute(self, view: ControlView) -> np.ndarray:
         """Commanded ``(v, omega)`` ``(N, 2)``; inactive robots get zeros."""
         ...
-
-
-class GoToPoseController:
-    """Placeholder: turn toward the goal, drive (forwards or backwards, whichever faces it),
-    then turn to the goal heading. No obstacle avoidance; the navigation stack replaces it."""
-
-    def __init__(
-        self,
-        *,
-        k_rho: float = 1.0,
-        k_alpha: float = 2.0,
-        k_yaw: float = 2.0,
-        pos_tol_m: float = 0.03,
-    ) -> None:
-        self.k_rho, self.k_alpha, self.k_yaw, self.pos_tol_m = k_rho, k_alpha, k_yaw, pos_tol_m
-
-    def compute(self, view: ControlView) -> np.ndarray:
-        p, g = view.poses, view.goals
-        d = g[:, :2] - p[:, :2]
-        rho = np.linalg.norm(d, axis=1)
-        bearing = np.arctan2(d[:, 1], d[:, 0])
-        alpha = wrap_angle(bearing - p[:, 2])
-        backwards = np.abs(alpha) > np.pi / 2
-        alpha = np.where(backwards, wrap_angle(alpha + np.pi), alpha)
-        sign = np.where(backwards, -1.0, 1.0)
-        v = sign * np.minimum(self.k_rho * rho, view.max_speed) * np.clip(np.cos(alpha), 0, 1) ** 4
-        w = self.k_alpha * alpha
-        at_goal = rho < self.pos_tol_m
-        v = np.where(at_goal, 0.0, v)
-        w = np.where(at_goal, self.k_yaw * wrap_angle(g[:, 2] - p[:, 2]), w)
-        cmd = np.column_stack([v, w])
-        cmd[~view.active] = 0.0
-        return cmd

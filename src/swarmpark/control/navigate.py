@@ -240,8 +240,9 @@ class Navigator:
         tangent = np.arctan2(ahead[1], ahead[0])
         return bool(abs(wrap_angle(view.poses[i, 2] - tangent)) > np.deg2rad(120))
 
-    def _shorter_end(self, view: ControlView, idx: np.ndarray) -> np.ndarray:
-        """True where the rear action point has the shorter arc to the goal."""
+    def _end_arcs(self, view: ControlView, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Arc lengths to the goal of the front and of the rear action point (2015 paper,
+        extension 1: the skid leads with whichever end has the shorter arc)."""
         fps = [view.footprints[i] for i in idx]
         xf = np.array([f.length_m - f.pivot for f in fps])
         xr = -np.array([f.pivot for f in fps])
@@ -254,6 +255,11 @@ class Navigator:
         rear = arc_length(
             pose[:, :2] + xr[:, None] * u, goal[:, :2] + xr[:, None] * ug, goal[:, 2] + np.pi
         )
+        return front, rear
+
+    def _shorter_end(self, view: ControlView, idx: np.ndarray) -> np.ndarray:
+        """True where the rear action point has the shorter arc to the goal."""
+        front, rear = self._end_arcs(view, idx)
         return rear < front
 
     # ------------------------------------------------------------------ targets
@@ -320,24 +326,11 @@ class Navigator:
         # Which end leads: fixed along a path; by the shorter arc (with hysteresis) at the end.
         reverse = np.array([self._robots[i].reverse for i in idx])
         if final.any():
-            rear_shorter = self._shorter_end(view, idx[final])
             cur = reverse[final]
-            fx = np.array([fps[i].length_m - fps[i].pivot for i in idx[final]])
-            xr = -np.array([fps[i].pivot for i in idx[final]])
-            pose_f, goal_f = poses[final], view.goals[idx[final]]
-            u = np.column_stack([np.cos(pose_f[:, 2]), np.sin(pose_f[:, 2])])
-            ug = np.column_stack([np.cos(goal_f[:, 2]), np.sin(goal_f[:, 2])])
-            lf = arc_length(
-                pose_f[:, :2] + fx[:, None] * u, goal_f[:, :2] + fx[:, None] * ug, goal_f[:, 2]
-            )
-            lr = arc_length(
-                pose_f[:, :2] + xr[:, None] * u,
-                goal_f[:, :2] + xr[:, None] * ug,
-                goal_f[:, 2] + np.pi,
-            )
+            lf, lr = self._end_arcs(view, idx[final])
+            # Switch ends only for a clearly shorter arc (hysteresis).
             switch = np.where(cur, lf < p.switch_ratio * lr, lr < p.switch_ratio * lf)
             new = np.where(switch, ~cur, cur)
-            new = np.where(np.isnan(lf) | np.isnan(lr), rear_shorter, new)
             reverse[final] = new
             for k, i in enumerate(idx[final]):
                 self._robots[i].reverse = bool(new[k])
