@@ -1,9 +1,13 @@
-"""Helpers for the tests: tiny worlds built from dicts, scripted controllers."""
+"""Helpers for the tests: tiny worlds built from dicts, scripted controllers, a small room
+and a route driven through it for the sensing tests."""
 
 from __future__ import annotations
 
 import numpy as np
+from shapely.geometry import Polygon, box
 
+from swarmpark.geometry import wrap_angle
+from swarmpark.gridmap import OccupancyGrid, grid_from_walls
 from swarmpark.scenario import build_world, parse_scenario
 
 
@@ -27,3 +31,38 @@ class Scripted:
 
     def compute(self, view):
         return np.asarray(self.fn(view.t), float).reshape(-1, 2)
+
+
+def asymmetric_room() -> OccupancyGrid:
+    """8 m x 5 m room, 10 cm walls, with a partition, a bench, a corner block and a wedge placed
+    so that no rotation or mirror of the room looks the same."""
+    w, h, t = 8.0, 5.0, 0.1
+    walls = [
+        box(0, 0, w, t),
+        box(0, h - t, w, h),
+        box(0, 0, t, h),
+        box(w - t, 0, w, h),
+        box(2.0, 0.0, 2.2, 2.0),
+        box(5.0, 3.2, 6.5, 3.5),
+        Polygon([(6.5, 0.1), (7.9, 0.1), (7.9, 1.2)]),
+        box(0.1, 4.3, 0.6, 4.9),
+    ]
+    return grid_from_walls((w, h), 0.05, walls)
+
+
+def drive(waypoints, v=0.5, w=1.0, dt=0.1) -> np.ndarray:
+    """True poses ``(T, 3)`` every ``dt`` for a skid that turns in place at each waypoint and
+    drives straight between them."""
+    out, yaw = [], None
+    pts = np.asarray(waypoints, dtype=float)
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
+        heading = float(np.arctan2(b[1] - a[1], b[0] - a[0]))
+        if yaw is not None:
+            turn = float(wrap_angle(heading - yaw))
+            for s in np.linspace(0, 1, int(abs(turn) / (w * dt)), endpoint=False):
+                out.append([a[0], a[1], yaw + s * turn])
+        yaw = heading
+        n = int(np.linalg.norm(b - a) / (v * dt))
+        for s in np.linspace(0, 1, n, endpoint=False):
+            out.append([*(a + s * (b - a)), yaw])
+    return np.array(out)

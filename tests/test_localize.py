@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import asymmetric_room, drive
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shapely.geometry import Polygon, box
+from shapely.geometry import box
 
 from swarmpark.geometry import Footprint, footprint_corners, wrap_angle
-from swarmpark.gridmap import OccupancyGrid, grid_from_walls
+from swarmpark.gridmap import grid_from_walls
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.localize import (
     RECOVERY,
@@ -23,42 +24,6 @@ from swarmpark.sense.localize import (
     pose_error_summary,
     relative_motion,
 )
-
-
-def asymmetric_room() -> OccupancyGrid:
-    """8 m x 5 m room, 10 cm walls, with a partition, a bench, a corner block and a wedge placed
-    so that no rotation or mirror of the room looks the same."""
-    w, h, t = 8.0, 5.0, 0.1
-    walls = [
-        box(0, 0, w, t),
-        box(0, h - t, w, h),
-        box(0, 0, t, h),
-        box(w - t, 0, w, h),
-        box(2.0, 0.0, 2.2, 2.0),
-        box(5.0, 3.2, 6.5, 3.5),
-        Polygon([(6.5, 0.1), (7.9, 0.1), (7.9, 1.2)]),
-        box(0.1, 4.3, 0.6, 4.9),
-    ]
-    return grid_from_walls((w, h), 0.05, walls)
-
-
-def drive(waypoints, v=0.5, w=1.0, dt=0.1) -> np.ndarray:
-    """True poses ``(T, 3)`` every ``dt`` for a skid that turns in place at each waypoint and
-    drives straight between them."""
-    out, yaw = [], None
-    pts = np.asarray(waypoints, dtype=float)
-    for a, b in zip(pts[:-1], pts[1:], strict=True):
-        heading = float(np.arctan2(b[1] - a[1], b[0] - a[0]))
-        if yaw is not None:
-            turn = float(wrap_angle(heading - yaw))
-            for s in np.linspace(0, 1, int(abs(turn) / (w * dt)), endpoint=False):
-                out.append([a[0], a[1], yaw + s * turn])
-        yaw = heading
-        n = int(np.linalg.norm(b - a) / (v * dt))
-        for s in np.linspace(0, 1, n, endpoint=False):
-            out.append([*(a + s * (b - a)), yaw])
-    return np.array(out)
-
 
 ROUTE_A = [[1, 3.5], [4.5, 4.3], [7, 4.2], [7, 2.2], [4, 1.5]]
 ROUTE_B = [[3.2, 3], [1, 2.6], [1, 1], [1, 3.5], [4.5, 4.3]]

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import asymmetric_room, drive
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shapely.geometry import Polygon, box
+from shapely.geometry import box
 
 from swarmpark.geometry import wrap_angle
 from swarmpark.gridmap import OccupancyGrid, grid_from_walls, load_map_yaml, save_map_yaml
@@ -19,40 +20,6 @@ from swarmpark.sense.mapping import (
     map_agreement,
     relative_pose,
 )
-
-
-def asymmetric_room() -> OccupancyGrid:
-    """The 8 m x 5 m room of test_localize (walls 10 cm, partition, bench, block, wedge)."""
-    w, h, t = 8.0, 5.0, 0.1
-    walls = [
-        box(0, 0, w, t),
-        box(0, h - t, w, h),
-        box(0, 0, t, h),
-        box(w - t, 0, w, h),
-        box(2.0, 0.0, 2.2, 2.0),
-        box(5.0, 3.2, 6.5, 3.5),
-        Polygon([(6.5, 0.1), (7.9, 0.1), (7.9, 1.2)]),
-        box(0.1, 4.3, 0.6, 4.9),
-    ]
-    return grid_from_walls((w, h), 0.05, walls)
-
-
-def drive(waypoints, v=0.5, w=1.0, dt=0.1) -> np.ndarray:
-    """Poses every ``dt``: turn in place at each waypoint, then straight to the next."""
-    out, yaw = [], None
-    pts = np.asarray(waypoints, dtype=float)
-    for a, b in zip(pts[:-1], pts[1:], strict=True):
-        heading = float(np.arctan2(b[1] - a[1], b[0] - a[0]))
-        if yaw is not None:
-            turn = float(wrap_angle(heading - yaw))
-            for s in np.linspace(0, 1, int(abs(turn) / (w * dt)), endpoint=False):
-                out.append([a[0], a[1], yaw + s * turn])
-        yaw = heading
-        n = int(np.linalg.norm(b - a) / (v * dt))
-        for s in np.linspace(0, 1, n, endpoint=False):
-            out.append([*(a + s * (b - a)), yaw])
-    return np.array(out)
-
 
 LOOP = [[1, 3.5], [4.5, 4.3], [7, 4.2], [7, 2.2], [4, 1.5], [3.2, 3], [1, 2.6], [1, 1], [1, 3.5]]
 SPEC = LidarSpec(range_noise_std_m=0.01)
