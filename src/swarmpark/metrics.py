@@ -14,7 +14,7 @@ import numpy as np
 from .assign import AssignmentError, bottleneck_assignment
 from .geometry import wrap_angle
 from .gridmap import OccupancyGrid
-from .plan import build_costmap, distance_field_from
+from .plan import build_costmap, path_length_matrix
 
 __all__ = [
     "POSITION_TOL_M",
@@ -235,20 +235,13 @@ def lower_bound_s(
     # Rasterized walls are conservative by up to a cell, and cell-centre tests by another half:
     # inflate by less so the grid's free space contains the true one.
     radius = max(inscribed_m - 2.0 * grid.resolution_m, 0.0)
-    cm = build_costmap(grid, radius, radius)
-    rc = grid.world_to_cell(starts[:, :2])
-    inb = grid.in_bounds(rc)
-    times = np.full((len(starts), len(goals)), np.inf)
-    for g, goal in enumerate(goals):
-        field_m = distance_field_from(cm, goal[:2])
-        d = np.full(len(starts), np.inf)
-        d[inb] = field_m[rc[inb, 0], rc[inb, 1]]
-        # 8-connected grid lengths exceed the true length by up to OCTILE_RATIO (and start and
-        # goal cells by a cell each): shrink them so the bound stays a bound. The straight
-        # line is a bound too; take the larger of the two where the grid found a path.
-        straight = np.linalg.norm(starts[:, :2] - goal[:2], axis=1)
-        shrunk = d / OCTILE_RATIO - 2 * grid.resolution_m
-        times[:, g] = np.where(np.isfinite(d), np.maximum(shrunk, straight), np.inf)
+    d = path_length_matrix(build_costmap(grid, radius, radius), starts[:, :2], goals[:, :2])
+    # 8-connected grid lengths exceed the true length by up to OCTILE_RATIO (and start and
+    # goal cells by a cell each): shrink them so the bound stays a bound. The straight line is
+    # a bound too; take the larger of the two where the grid found a path.
+    straight = np.linalg.norm(starts[:, None, :2] - goals[None, :, :2], axis=-1)
+    shrunk = d / OCTILE_RATIO - 2 * grid.resolution_m
+    times = np.where(np.isfinite(d), np.maximum(shrunk, straight), np.inf)
     times /= np.asarray(max_speed_mps, float)[:, None]
     try:
         _, worst = bottleneck_assignment(times)

@@ -214,5 +214,20 @@ def distance_field_from(
     return cum * grid.resolution_m
 
 
+def path_length_matrix(costmap: Costmap, starts_xy, goals_xy) -> np.ndarray:
+    """Free-space path lengths ``(R, G)`` from every start to every goal (``inf`` where there
+    is none): one Dijkstra run per goal, read at the starts' cells."""
+    grid = costmap.grid
+    starts_xy = np.asarray(starts_xy, float).reshape(-1, 2)
+    goals_xy = np.asarray(goals_xy, float).reshape(-1, 2)
+    rc = grid.world_to_cell(starts_xy)
+    inb = grid.in_bounds(rc)
+    out = np.full((len(starts_xy), len(goals_xy)), np.inf)
+    for g, goal in enumerate(goals_xy):
+        field_m = distance_field_from(costmap, goal)
+        out[inb, g] = field_m[rc[inb, 0], rc[inb, 1]]
+    return out
+
+
 def path_length(path: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1).sum())

@@ -366,17 +366,11 @@ class Supervisor:
 
     def controller_path_lengths(self, idx: np.ndarray, goals: np.ndarray) -> np.ndarray:
         """Free-space path lengths robot -> goal ``(R, G)`` (one Dijkstra per goal)."""
-        from .plan import build_costmap, distance_field_from
+        from .plan import build_costmap, path_length_matrix
 
         widths = [self.world.robots[i].footprint.width_m for i in idx]
         cm = build_costmap(self.world.grid, min(widths) / 2, min(widths) / 2)
-        rc = self.world.grid.world_to_cell(self.sim.poses[idx, :2])
-        out = np.full((len(idx), len(goals)), np.inf)
-        inb = self.world.grid.in_bounds(rc)
-        for g, goal in enumerate(goals):
-            f = distance_field_from(cm, goal[:2])
-            out[inb, g] = f[rc[inb, 0], rc[inb, 1]]
-        return out
+        return path_length_matrix(cm, self.sim.poses[idx, :2], goals[:, :2])
 
     def goto(self, cmd: GotoCmd) -> Outcome:
         if cmd.robot not in self.index:
