@@ -84,9 +84,7 @@ class MetricsRecorder:
         self._best_t = np.zeros(n)
         self._deadlock: list[Deadlock | None] = [None] * n
         self.deadlocks: list[Deadlock] = []
-        self.max_speed_seen = np.zeros(n)
         self.tick_ms: list[float] = []
-        self.goal_changes = np.zeros(n, dtype=int)
 
     def on_goal(self, t: float, idx: np.ndarray) -> None:
         """Robots ``idx`` got a new goal at time ``t``."""
@@ -97,13 +95,11 @@ class MetricsRecorder:
         self._entered[idx] = np.nan
         self._best[idx] = np.inf
         self._best_t[idx] = t
-        self.goal_changes[idx] += 1
 
     def on_step(
         self,
         t: float,
         poses: np.ndarray,
-        vel: np.ndarray,
         goals: np.ndarray,
         has_goal: np.ndarray,
         paused: np.ndarray,
@@ -112,7 +108,6 @@ class MetricsRecorder:
         """Record the state after one step (``paused``: stopped or e-stopped robots)."""
         self.path_length += np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
         self._prev = poses.copy()
-        self.max_speed_seen = np.maximum(self.max_speed_seen, np.abs(vel[:, 0]))
         for c in step.new_contacts:
             self.collisions.append(c.as_dict())
         if step.clearance_robot_m is not None and len(poses) > 1:

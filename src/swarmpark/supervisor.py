@@ -98,7 +98,6 @@ class Supervisor:
         self.goals = np.zeros((n, 3))
         self.has_goal = np.zeros(n, dtype=bool)
         self.priority = np.array([r.priority for r in world.robots], float)
-        self.base_priority = self.priority.copy()
         self.stopped = np.zeros(n, dtype=bool)
         self.estopped = False
         self.teleop = np.zeros(n, dtype=bool)
@@ -121,7 +120,6 @@ class Supervisor:
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
         )
-        self._last_cmd = np.zeros((n, 2))
 
     # ------------------------------------------------------------------ state
 
@@ -680,13 +678,11 @@ class Supervisor:
         step = self.sim.step(cmd, hold=hold)
         if self.localizer is not None:
             self._sense()
-        self._last_cmd = cmd
         # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
         paused = self.stopped | self.teleop | self.estopped | view.hold
         self.metrics.on_step(
             self.sim.t,
             self.sim.poses,
-            self.sim.vel,
             self.goals,
             self.has_goal,
             paused,

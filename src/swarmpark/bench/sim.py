@@ -87,7 +87,7 @@ goals, has = np.zeros((n, 3)), np.zeros(n, bool)
 paused = np.zeros(n, bool)
 for k in range(int(round(seconds / sim.dt))):
     step = sim.step(jiggle(n, k))
-    metrics.on_step(sim.t, sim.poses, sim.vel, goals, has, paused, step)
+    metrics.on_step(sim.t, sim.poses, goals, has, paused, step)
 # ru_maxrss survives execve on Linux (it would report the parent's peak at fork): read the
 # peak of this process's own address space instead.
 try:

@@ -503,10 +503,6 @@ class Navigator:
                 out[k] = (0.5 * view.max_speed[i] * np.sign(along + 1e-9), 0.0)
         return out
 
-    def docked(self) -> np.ndarray:
-        """Robots holding still on their goals."""
-        return np.array([r.docked for r in self._robots], dtype=bool)
-
     def _hold_outside(self, view: ControlView, idx: np.ndarray, cmd: np.ndarray) -> None:
         """Held skids (fill order) stop before they come within ``hold_gap_m`` of their
         parking boundary; moving away from it stays allowed."""
