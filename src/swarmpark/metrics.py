@@ -85,10 +85,18 @@ class MetricsRecorder:
         self._deadlock: list[Deadlock | None] = [None] * n
         self.deadlocks: list[Deadlock] = []
         self.tick_ms: list[float] = []
+        # The straight leg from where each robot got its goal to the goal, and the largest
+        # distance of the robot from it since (the detour it took).
+        self._leg = np.repeat(self._prev[:, None, :2], 2, axis=1)
+        self._lateral = np.zeros(n)
 
-    def on_goal(self, t: float, idx: np.ndarray) -> None:
-        """Robots ``idx`` got a new goal at time ``t``."""
+    def on_goal(self, t: float, idx: np.ndarray, goals: np.ndarray | None = None) -> None:
+        """Robots ``idx`` got a new goal at time ``t`` (``goals``: their poses, if known)."""
         idx = np.atleast_1d(idx)
+        if goals is not None:
+            self._leg[idx, 0] = self._prev[idx, :2]
+            self._leg[idx, 1] = np.asarray(goals, float).reshape(-1, 3)[:, :2]
+            self._lateral[idx] = 0.0
         if self.first_goal_s is None and len(idx):
             self.first_goal_s = t
         self._commanded[idx] = True
@@ -107,6 +115,13 @@ class MetricsRecorder:
     ) -> None:
         """Record the state after one step (``paused``: stopped or e-stopped robots)."""
         self.path_length += np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
+        a, b = self._leg[:, 0], self._leg[:, 1]
+        ab = b - a
+        f = np.einsum("ij,ij->i", poses[:, :2] - a, ab) / np.maximum(
+            np.einsum("ij,ij->i", ab, ab), 1e-12
+        )
+        foot = a + np.clip(f, 0.0, 1.0)[:, None] * ab
+        self._lateral = np.maximum(self._lateral, np.linalg.norm(poses[:, :2] - foot, axis=1))
         self._prev = poses.copy()
         for c in step.new_contacts:
             self.collisions.append(c.as_dict())
@@ -171,6 +186,9 @@ class MetricsRecorder:
                 if np.isnan(self._entered[i])
                 else round(float(self._entered[i]), 3),
                 "path_length_m": round(float(self.path_length[i]), 4),
+                # Largest distance from the straight line between where the robot got its
+                # last goal and that goal (how far it detoured, e.g. to avoid another).
+                "max_lateral_deviation_m": round(float(self._lateral[i]), 4) if cmd[i] else None,
                 "final_position_error_m": round(float(pos_err[i]), 4) if has_goal[i] else None,
                 "final_heading_error_deg": round(float(np.rad2deg(head_err[i])), 3)
                 if has_goal[i]

@@ -507,7 +507,7 @@ class Supervisor:
         self.has_goal[idx] = True
         self.goal_changed[idx[changed]] = True
         if changed.any():
-            self.metrics.on_goal(self.t, idx[changed])
+            self.metrics.on_goal(self.t, idx[changed], goals[changed])
 
     # ------------------------------------------------------------------ the tick
 
@@ -680,6 +680,9 @@ class Supervisor:
             self._sense()
         # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
         paused = self.stopped | self.teleop | self.estopped | view.hold
+        aside = getattr(self.controller, "making_room", None)  # standing aside (RVO)
+        if aside is not None and len(aside) == self.sim.n:
+            paused = paused | aside
         self.metrics.on_step(
             self.sim.t,
             self.sim.poses,

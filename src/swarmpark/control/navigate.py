@@ -61,6 +61,23 @@ class NavParams:
     parked_priority: float = 0.0
     #: Every skid keeps at least this share of the avoidance (a boxed-in skid cannot yield).
     rvo_min_share: float = 0.1
+    #: Making room (RVO): a parked skid whose footprint lies in the corridor another skid
+    #: will sweep (its path from its rear to this far ahead) or a walking person will cross
+    #: (this far ahead along their velocity) drives along its own axis out of the corridor,
+    #: which is the passing skid's half-width plus ``room_clearance_m`` to either side.
+    room_lookahead_m: float = 4.0
+    room_clearance_m: float = 0.3
+    #: Speed (m/s) per metre still to go while making room, and the priority meanwhile
+    #: (above ``parked_priority``, so it pushes still-parked neighbours on along their axes).
+    room_gain: float = 1.5
+    room_priority: float = 0.5
+    #: With RVO a skid on its path aims its effective centre this far ahead on the path (a
+    #: long lookahead, so that a sidestep does not turn into a pull back onto the path).
+    rvo_lookahead_m: float = 3.0
+    #: Extra margin (m) around skids on the move in the velocity obstacles.
+    rvo_margin_m: float = 0.1
+    #: Horizon (s) of the velocity obstacles between skids: avoid this early.
+    rvo_horizon_s: float = 5.0
     replan_period_s: float = 3.0
     #: At most this many paths are planned in one tick.
     max_plans_per_tick: int = 8
@@ -116,6 +133,11 @@ class _RobotNav:
     reverse: bool = False
     failed: bool = False
     docked: bool = False
+    #: Reached its current goal once (reset by a new goal): with RVO it yields from then on,
+    #: also while it returns after being pushed aside.
+    settled: bool = False
+    #: Side (+1 along the heading, -1 against it) this skid last made room to, or 0.
+    room_side: int = 0
     runup: bool = False
     runup_from: float = 0.0
     backup_left: float = 0.0
@@ -139,6 +161,8 @@ class Navigator:
         self._static_key: int | None = None
         self._static_tree = None
         self._static_kd = None
+        #: (N,) skids standing aside for another on purpose this tick (RVO; not deadlocked).
+        self.making_room = np.zeros(0, dtype=bool)
 
     # ------------------------------------------------------------------ helpers
 
@@ -264,10 +288,13 @@ class Navigator:
 
     # ------------------------------------------------------------------ targets
 
-    def _targets(self, view: ControlView, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _targets(
+        self, view: ControlView, idx: np.ndarray, lookahead_m: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Temporary goal pose per robot (lookahead on the path, or the goal) and whether the
         robot is in its final approach."""
         p = self.params
+        lookahead_m = p.lookahead_m if lookahead_m is None else lookahead_m
         targets = view.goals[idx].copy()
         final = np.ones(len(idx), dtype=bool)
         for k, i in enumerate(idx):
@@ -288,7 +315,7 @@ class Navigator:
             if remaining <= p.approach_m:
                 continue
             final[k] = False
-            s_t = min(s_here + p.lookahead_m, cum[-1])
+            s_t = min(s_here + lookahead_m, cum[-1])
             m = int(np.clip(np.searchsorted(cum, s_t, side="right") - 1, 0, len(seg) - 1))
             f = (s_t - cum[m]) / max(seg_len[m], 1e-12)
             pt = path[m] + f * seg[m]
@@ -363,7 +390,9 @@ class Navigator:
         if p.avoidance == "rvo":
             full = np.zeros((n, 2))
             full[idx] = raw
-            full = self._orca(view, full)
+            cruising = ~final & ~waiting
+            aims, _ = self._targets(view, idx[cruising], p.rvo_lookahead_m)
+            full = self._orca(view, full, idx[cruising], aims)
             moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
             cmd[moving] = self._monitor(view, moving, full[moving], robots=False)
             self._hold_outside(view, idx, cmd)
@@ -408,7 +437,7 @@ class Navigator:
         for k, i in enumerate(idx):
             nav = self._robots[i]
             if view.goal_changed[i]:
-                nav.docked = nav.runup = False
+                nav.docked = nav.runup = nav.settled = False
             parked = (
                 abs(e_long[k]) < p.parked_pos_m
                 and abs(e_lat[k]) < p.dock_lateral_m
@@ -417,7 +446,7 @@ class Navigator:
             if nav.docked and (dist[k] > p.resume_pos_m or abs(e_yaw[k]) > p.resume_yaw_rad):
                 nav.docked = False
             if nav.docked or parked:
-                nav.docked, nav.runup = True, False
+                nav.docked, nav.runup, nav.settled = True, False, True
                 out[k] = 0.0
                 continue
             close = final[k] and dist[k] < p.runup_m * 2.0
@@ -562,9 +591,13 @@ class Navigator:
         self._static_points(view)
         body_pts, body_owner, _ = self._outlines(view)
         # Other skids' outlines in the world, and people (their rims are handled below).
+        # With RVO, skids and people are left to the velocity obstacles: the field only
+        # follows the path and keeps off static solids.
         robot_pts = transform_points(view.poses[body_owner], body_pts[:, None, :])[:, 0]
         dyn = np.vstack([robot_pts, view.people_xy])
         dyn_owner = np.concatenate([body_owner, np.full(len(view.people_xy), -2)])
+        if p.avoidance == "rvo":
+            dyn, dyn_owner = dyn[:0], dyn_owner[:0]
         reach = np.array([view.footprints[i].reach_m for i in idx]) + influence
         rob_l, pt_l, src_l = [], [], []
         if self._static_kd is not None:
@@ -587,12 +620,13 @@ class Navigator:
             return z, z.copy()
         rob, pt, src = np.concatenate(rob_l), np.concatenate(pt_l), np.concatenate(src_l)
         is_dyn = src == 1
-        owner = np.where(is_dyn, dyn_owner[np.where(is_dyn, pt, 0)], -1)
+        owner = np.full(len(pt), -1)
+        owner[is_dyn] = dyn_owner[pt[is_dyn]]
         keep = owner != idx[rob]
         rob, pt, is_dyn, owner = rob[keep], pt[keep], is_dyn[keep], owner[keep]
-        world = np.where(
-            is_dyn[:, None], dyn[np.where(is_dyn, pt, 0)], self._static_pts[np.where(is_dyn, 0, pt)]
-        )
+        world = np.empty((len(pt), 2))
+        world[is_dyn] = dyn[pt[is_dyn]]
+        world[~is_dyn] = self._static_pts[pt[~is_dyn]]
         gain = np.where(owner == -1, p.k_static, np.where(owner == -2, p.k_person, p.k_robot))
         pose = view.poses[idx[rob]]
         d = world - pose[:, :2]
@@ -697,12 +731,126 @@ class Navigator:
             nav.blocked_s = nav.blocked_s + view.dt if nav.blockers else 0.0
         return out
 
-    def _orca(self, view: ControlView, raw: np.ndarray) -> np.ndarray:
+    def _path_ahead(self, view: ControlView, i: int, length: float) -> np.ndarray | None:
+        """Skid ``i``'s path from its rear to ``length`` ahead of its pivot (a polyline)."""
+        path = self._robots[i].path
+        pose = view.poses[i]
+        fp = view.footprints[i]
+        head = np.array([np.cos(pose[2]), np.sin(pose[2])])
+        back = pose[:2] - head * (fp.length_m - fp.pivot if self._robots[i].reverse else fp.pivot)
+        if path is None or len(path) < 2:
+            return np.vstack([back, pose[:2]])
+        seg = np.diff(path, axis=0)
+        seg_len = np.linalg.norm(seg, axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+        rel = pose[:2] - path[:-1]
+        t = np.clip(np.einsum("ij,ij->i", rel, seg) / np.maximum(seg_len**2, 1e-12), 0, 1)
+        proj = path[:-1] + t[:, None] * seg
+        j = int(np.argmin(np.linalg.norm(proj - pose[:2], axis=1)))
+        s_end = cum[j] + t[j] * seg_len[j] + length
+        inner = path[j + 1 :][cum[j + 1 :] < s_end]
+        m = int(np.clip(np.searchsorted(cum, s_end, side="right") - 1, 0, len(seg) - 1))
+        tip = path[m] + min((s_end - cum[m]) / max(seg_len[m], 1e-12), 1.0) * seg[m]
+        return np.vstack([back, pose[:2], inner, tip])
+
+    def _make_room(self, view: ControlView, settled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed speed along its own axis for each settled skid that stands in another's way,
+        and which settled skids are standing aside (making room, or waiting aside while their
+        own spot is in the way).
+
+        The corridors are the paths (rear to ``room_lookahead_m`` ahead) of the skids on the
+        move and the walks of people, widened by the mover's half-width plus
+        ``room_clearance_m``. A settled skid inside one drives along its axis to the nearer
+        side that is clear of every corridor and of static solids, keeping the side it chose
+        while it stays in the way.
+        """
+        p = self.params
+        n = len(view.poses)
+        speed = np.zeros(n)
+        aside = np.zeros(n, dtype=bool)
+        corridors = []
+        movers = np.flatnonzero(view.active & ~settled)
+        for j in movers:
+            line = self._path_ahead(view, j, p.room_lookahead_m)
+            half = view.footprints[j].width_m / 2 + p.room_clearance_m
+            corridors.append(shapely.LineString(line).buffer(half, cap_style="flat"))
+            # The skid itself as it stands (it may be turning on the spot).
+            corridors.append(shapely.Polygon(self._corners_now(view, j)).buffer(p.room_clearance_m))
+        walking = np.linalg.norm(view.people_vel, axis=1) > 1e-6 if len(view.people_xy) else []
+        for k in np.flatnonzero(walking):
+            v = view.people_vel[k]
+            ahead = view.people_xy[k] + v / np.linalg.norm(v) * p.room_lookahead_m
+            half = view.people_radius[k] + p.room_clearance_m
+            corridors.append(shapely.LineString([view.people_xy[k], ahead]).buffer(half))
+        cand = (
+            np.flatnonzero(settled & ~view.stopped)
+            if view.stopped is not None
+            else np.flatnonzero(settled)
+        )
+        if not corridors or not len(cand):
+            for i in cand:
+                self._robots[i].room_side = 0
+            return speed, aside
+        way = shapely.union_all(corridors)
+        shapely.prepare(way)
+        feet = shapely.polygons(footprint_corners(view.poses[cand], self._plain[cand]))
+        inside = shapely.intersects(way, feet)
+        self._static_points(view)
+        steps = np.arange(1, 41) * 0.05  # candidate shifts, m
+        # Skids that stood aside wait there while their own spot is still in the way.
+        goal_feet = shapely.polygons(footprint_corners(view.goals[cand], self._plain[cand]))
+        spot_taken = shapely.intersects(way, goal_feet)
+        for i, hit, taken in zip(cand, inside, spot_taken, strict=True):
+            nav = self._robots[i]
+            if not hit:
+                if nav.room_side and taken:
+                    aside[i] = True
+                else:
+                    nav.room_side = 0
+                continue
+            head = np.array([np.cos(view.poses[i, 2]), np.sin(view.poses[i, 2])])
+            shifts = np.concatenate([steps, -steps])
+            poses = np.repeat(view.poses[i][None], len(shifts), axis=0)
+            poses[:, :2] += shifts[:, None] * head
+            moved = shapely.polygons(footprint_corners(poses, self._plain[[i] * len(shifts)]))
+            free = ~shapely.intersects(way, moved)
+            blocked, _ = self._static_tree.query(moved, predicate="intersects")
+            free[blocked] = False
+            best = None
+            for side in ([nav.room_side] if nav.room_side else []) + [1, -1]:
+                ok = np.flatnonzero(free & (np.sign(shifts) == side))
+                if len(ok):
+                    t = shifts[ok[np.argmin(np.abs(shifts[ok]))]]
+                    if best is None or (side == nav.room_side) or abs(t) < abs(best):
+                        best = t
+                    if side == nav.room_side:
+                        break
+            aside[i] = True
+            if best is None:
+                continue
+            nav.room_side = int(np.sign(best))
+            nav.docked = False  # dock again precisely once the way is clear
+            speed[i] = np.clip(
+                p.room_gain * (best + np.sign(best) * 0.05), -view.max_speed[i], view.max_speed[i]
+            )
+        return speed, aside
+
+    def _corners_now(self, view: ControlView, i: int) -> np.ndarray:
+        return footprint_corners(view.poses[i][None], self._plain[i][None])[0]
+
+    def _orca(
+        self, view: ControlView, raw: np.ndarray, cruising: np.ndarray, aims: np.ndarray
+    ) -> np.ndarray:
         """ORCA with priorities on every skid's effective centre (see :mod:`.rvo`).
 
-        The field's command is the preferred velocity; skids holding still on a goal (or
-        without one) take ``parked_priority`` and so make room, and come back afterwards by
-        their own docking; stopped skids (no goal change allowed) are immobile.
+        Skids following a path (``cruising``, with lookahead points ``aims``) prefer to move
+        their effective centre straight at the lookahead point at full speed (RVO's
+        preferred velocity); near the goal the field's and the docking command is the
+        preferred velocity, as it is without RVO. Skids that have reached their goal
+        (``settled``) take ``parked_priority`` and move only along their own axis: they make
+        room for skids on the move and people (:meth:`_make_room`, at ``room_priority``),
+        yield to everyone, and dock back afterwards. Stopped skids and skids without orders
+        are immobile: everyone else takes the full share against them.
         """
         from .rvo import (
             OrcaParams,
@@ -716,6 +864,7 @@ class Navigator:
             unicycle_to_holonomic,
         )
 
+        p = self.params
         self._outlines(view)
         if getattr(self, "_orca_key", None) != id(view.static_pieces):
             # Static pieces are convex (triangles and squares padded to 4 corners).
@@ -732,15 +881,31 @@ class Navigator:
         err = tracking_error_bound(
             u_lim, view.max_yaw_rate, effective_reach(self._plain, d), view.dt
         )
-        centres, shapes = skid_shapes(view.poses, self._plain, offset_m=d, margin_m=err)
+        h = np.column_stack([np.cos(view.poses[:, 2]), np.sin(view.poses[:, 2])])
         u_now = unicycle_to_holonomic(view.poses, view.vel[:, 0], view.vel[:, 1], offset_m=d)
         u_pref = unicycle_to_holonomic(view.poses, raw[:, 0], raw[:, 1], offset_m=d)
-        docked = np.array([r.docked for r in self._robots], dtype=bool)
-        yielding = docked | ~view.active
-        prio = np.where(yielding, self.params.parked_priority, view.priority)
-        immobile = np.zeros(len(view.poses), dtype=bool)
+        immobile = ~view.active
         if view.stopped is not None:
-            immobile = view.stopped.copy()
+            immobile |= view.stopped
+        settled = np.array([r.settled for r in self._robots], dtype=bool) & ~immobile
+        room, aside = self._make_room(view, settled)
+        self.making_room = aside
+        # Settled skids move along their axis only: turning in a tight formation would sweep
+        # their corners into their neighbours.
+        along_pref = np.where(aside, room, raw[:, 0])
+        u_pref[settled] = along_pref[settled, None] * h[settled]
+        # Skids on the move keep a little more room (rvo_margin_m) than the tracking bound:
+        # their turns lag the command by the yaw acceleration limit. Parked ones only move
+        # straight and sit close together, so they keep the bound alone.
+        margin = err + np.where(settled | immobile, 0.0, p.rvo_margin_m)
+        centres, shapes = skid_shapes(view.poses, self._plain, offset_m=d, margin_m=margin)
+        if len(cruising):
+            to_aim = aims[:, :2] - centres[cruising]
+            dist = np.linalg.norm(to_aim, axis=1, keepdims=True)
+            u_pref[cruising] = to_aim / np.maximum(dist, 1e-9) * u_lim[cruising, None]
+        prio = np.where(settled, p.parked_priority, view.priority)
+        prio = np.where(room != 0, p.room_priority, prio)
+        axes = np.where(settled[:, None], h, np.nan)
         res = orca_step(
             centres,
             u_now,
@@ -749,12 +914,14 @@ class Navigator:
             prio,
             shapes,
             dt_s=view.dt,
-            params=OrcaParams(min_share=self.params.rvo_min_share),
+            params=OrcaParams(min_share=p.rvo_min_share, time_horizon_s=p.rvo_horizon_s),
             immobile=immobile,
             people_positions=view.people_xy,
             people_velocities=view.people_vel,
             people_radii=view.people_radius,
             obstacles=self._orca_obstacles,
+            axes=axes,
+            pref_opt=~settled,
         )
         v, w = holonomic_to_unicycle(
             view.poses,
@@ -764,14 +931,13 @@ class Navigator:
             omega_max=view.max_yaw_rate,
         )
         out = np.column_stack([v, w])
-        # Skids making room move along their own axis only: turning in a tight formation
-        # would sweep their corners into their neighbours. They dock back afterwards.
-        h = np.column_stack([np.cos(view.poses[:, 2]), np.sin(view.poses[:, 2])])
         along = np.clip(np.einsum("ij,ij->i", res.velocities, h), -view.max_speed, view.max_speed)
-        out[yielding] = np.column_stack([along, np.zeros(len(along))])[yielding]
+        out[settled] = np.column_stack([along, np.zeros_like(along)])[settled]
+        for i in np.flatnonzero(settled & (np.abs(along) > 1e-3)):
+            self._robots[i].docked = False  # pushed aside: dock again precisely afterwards
         # Pure turns in place (u = 0 at the centre would drop them) pass through when ORCA
         # left the preferred velocity unchanged.
-        same = np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9
+        same = (np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9) & ~settled
         out[same] = raw[same]
         out[immobile] = 0.0
         return out

@@ -110,6 +110,8 @@ SMALL_MERGE = 64
 PAIR_CHUNK = 4096
 #: Sides of the regular polygon that covers a person's disc (circumscribed: conservative).
 DEFAULT_DISC_SIDES = 8
+#: Half-width (m/s) of the band a robot held on its axis may leave it by (round-off room).
+AXIS_SLACK = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -147,6 +149,10 @@ class OrcaParams:
         other thanks to curvature). A leg of the cone at most ``leg_preference`` times the
         relative speed farther than that face is used instead, so they start passing; ties
         keep right. Any boundary point keeps ORCA's guarantee; ``0`` is plain ORCA.
+    keep_right
+        Between two robots, the right leg of the cone is taken unless the left one is
+        nearer by more than ``keep_right`` times the relative speed: both keep right, and a
+        nearly symmetric head-on encounter does not flip sides from one step to the next.
     safety_filter
         After the decision, check every pair of robots (and robot and static obstacle) for
         overlap while moving straight with the chosen velocities for one step; robots in such
@@ -166,6 +172,7 @@ class OrcaParams:
     slowest_fallback: bool = False
     safety_filter: bool = True
     leg_preference: float = 0.5
+    keep_right: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("time_horizon_s", "time_horizon_obst_s"):
@@ -182,6 +189,8 @@ class OrcaParams:
             raise ValueError(
                 f"OrcaParams.neighbour_dist_m must be None or > 0 (got {self.neighbour_dist_m!r})"
             )
+        if not (np.isfinite(self.keep_right) and self.keep_right >= 0):
+            raise ValueError(f"OrcaParams.keep_right must be >= 0 (got {self.keep_right!r})")
         if not (np.isfinite(self.leg_preference) and self.leg_preference >= 0):
             raise ValueError(
                 f"OrcaParams.leg_preference must be >= 0 (got {self.leg_preference!r})"
@@ -432,7 +441,7 @@ def minkowski_difference(b: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.stack([mx.T, my.T], -1)
 
 
-def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0):
+def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0, keep_right=0.0):
     """Shortest move ``u`` from the relative velocity to the boundary of the velocity
     obstacle, and the obstacle's outward normal ``n`` there (see :func:`pair_halfplanes`).
 
@@ -474,8 +483,11 @@ def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0):
     nix, niy = nx[k_edge, cols], ny[k_edge, cols]
     s_left = np.where(colliding, -np.inf, -luy * wx + lux * wy)
     s_right = np.where(colliding, -np.inf, guy * wx - gux * wy)
-    # Exact ties (mirror-symmetric encounters) go to the right leg: both robots keep right.
-    right = s_right >= s_left
+    # Near-ties go to the right leg: both robots keep right (the pair's obstacles are point
+    # reflections of each other, which keeps handedness). Without the margin a nearly
+    # symmetric encounter flips sides with every small turn (the reciprocal dance).
+    speed = np.sqrt(wx * wx + wy * wy)
+    right = s_right + keep_right * speed >= s_left
     s_leg = np.where(right, s_right, s_left)
     lnx, lny = np.where(right, guy, -luy), np.where(right, -gux, lux)
     inside = np.maximum(s_in, s_leg) <= 0.0
@@ -483,7 +495,6 @@ def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0):
     # guarantee. ORCA takes the nearest; a flat cut-off face (rectangles) then only ever
     # brakes two robots meeting head-on. A leg within leg_preference * |w| of the face is
     # taken instead, so that they start passing each other (as discs do by curvature).
-    speed = np.sqrt(wx * wx + wy * wy)
     take_leg = ~colliding & (s_leg + leg_preference * speed >= s_in)
     s_in = np.where(take_leg, s_leg, s_in)
     nix, niy = np.where(take_leg, lnx, nix), np.where(take_leg, lny, niy)
@@ -1100,6 +1111,8 @@ def orca_step(
     people_velocities: np.ndarray | None = None,
     people_radii=None,
     obstacles: StaticObstacles | None = None,
+    axes: np.ndarray | None = None,
+    pref_opt: np.ndarray | None = None,
 ) -> OrcaResult:
     """New velocities for all robots from one snapshot (no dependence on robot order).
 
@@ -1130,6 +1143,20 @@ def orca_step(
         ``(P, 2)``, ``(P, 2)``, ``(P,)`` or scalar: moving discs that do not avoid robots.
     obstacles
         Static obstacles from :func:`prepare_obstacles`.
+    axes
+        ``(N, 2)`` unit vectors, NaN where free: these robots may only move along that line
+        (a parked skid making room by driving along its own axis, so that it does not turn
+        its corners into its neighbours). Two opposite hard half-planes hold the velocity on
+        the line; the other robots still count on the robot's full share, so where the line
+        cannot provide it, the safety filter keeps the step collision-free.
+    pref_opt
+        ``(N,)`` bool: between two such robots the velocity obstacle is taken at their
+        preferred velocities rather than their current ones (ORCA's ``v_opt = v_pref``, van
+        den Berg et al. 2011 Sect. 5.2; both robots of a pair use the same choice, so the
+        shares still add up). Two skids meeting head-on then take the legs of the obstacle
+        and pass, instead of the flat cut-off face, along which the one with the larger
+        share is pushed backwards ahead of the other. Meant for robots on the move, where
+        the constraints stay few; dense groups keep ``v_opt`` = current velocity.
 
     Returns
     -------
@@ -1154,13 +1181,28 @@ def orca_step(
     if still.shape != (n,):
         raise ValueError(f"immobile: expected shape ({n},), got {still.shape}")
     vel = np.where(still[:, None], 0.0, vel)
+    use_pref = np.zeros(n, bool) if pref_opt is None else np.asarray(pref_opt, dtype=bool)
+    if use_pref.shape != (n,):
+        raise ValueError(f"pref_opt: expected shape ({n},), got {use_pref.shape}")
+    use_pref = use_pref & ~still
     inv_dt = 1.0 / dt_s
     reach = np.linalg.norm(shp, axis=-1).max(axis=1) if n else np.zeros(0)
     speed = np.maximum(vmax, np.linalg.norm(vel, axis=-1))
 
     blocks = []
-    # Static obstacles: hard constraints, full share, their own horizon.
     n_hard = 0
+    # Robots held on a line: velocity ``v`` with ``|n . v| <= AXIS_SLACK`` (``n`` its normal).
+    if axes is not None and n:
+        raw_axes = _as_array(np.nan_to_num(np.asarray(axes, dtype=float), nan=0.0), (n, 2), "axes")
+        on = ~np.isnan(np.asarray(axes, dtype=float)).any(axis=1)
+        ax = np.where(on[:, None], raw_axes, [1.0, 0.0])
+        nrm = np.stack([-ax[:, 1], ax[:, 0]], -1) * AXIS_SLACK
+        pt = np.stack([-nrm, nrm], 1)
+        dr = np.stack([ax, -ax], 1)
+        valid = np.repeat(on[:, None], 2, axis=1)
+        blocks.append((pt, dr, valid))
+        n_hard = 2
+    # Static obstacles: hard constraints, full share, their own horizon.
     obstacle_pairs = None
     if obstacles is not None and len(obstacles) and n:
         step_reach = reach + vmax * dt_s
@@ -1182,8 +1224,9 @@ def orca_step(
                     np.full(int(keep.sum()), 1.0 / params.time_horizon_obst_s),
                     inv_dt,
                 )
-                n_hard = int(rank[keep].max()) + 1
-                blocks.append(_scatter(n, n_hard, ia[keep], rank[keep], pt, dr))
+                m_obst = int(rank[keep].max()) + 1
+                n_hard += m_obst
+                blocks.append(_scatter(n, m_obst, ia[keep], rank[keep], pt, dr))
             near = dist <= step_reach[ia]
             obstacle_pairs = (
                 ia[near],
@@ -1288,18 +1331,21 @@ def orca_step(
             if rows.size:
                 used, pair_of = np.unique(inverse[:n_orca], return_inverse=True)
                 a, b = lo[used], hi[used]
+                both = use_pref[a] & use_pref[b]
+                rel_opt = np.where(both[:, None], pref[a] - pref[b], vel[a] - vel[b])
                 ux, uy, nx, ny, inside = _in_chunks(
                     _vo_projection,
                     5,
                     used.size,
                     (rx[:, used], ry[:, used]),
                     (
-                        vel[a, 0] - vel[b, 0],
-                        vel[a, 1] - vel[b, 1],
+                        rel_opt[:, 0],
+                        rel_opt[:, 1],
                         np.full(used.size, 1.0 / params.time_horizon_s),
                     ),
                     inv_dt,
                     params.leg_preference,
+                    params.keep_right,
                 )
                 sign = np.where(rows == a[pair_of], 1.0, -1.0)
                 share = responsibility_shares(prio[rows], prio[nb], params.min_share)
@@ -1309,7 +1355,7 @@ def orca_step(
                 # Against a robot that will not move, all of it is ours, either way.
                 share = np.where(still[nb], 1.0, share)
                 pt, dr = _lines(
-                    vel[rows],
+                    np.where(both[pair_of, None], pref[rows], vel[rows]),
                     share,
                     sign * ux[pair_of],
                     sign * uy[pair_of],
