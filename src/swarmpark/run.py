@@ -73,6 +73,14 @@ def run_world(
         else:
             settled_since = None
     result = sup.metrics.result(sup.t, sup.sim.poses, sup.goals, sup.has_goal)
+    recoveries = getattr(sup.controller, "recoveries", None)
+    if recoveries is not None:
+        # Deadlock recoveries the navigator applied (RVO): who, when, what, time to clear
+        # (None: still stuck at the end).
+        result["recoveries"] = [
+            {**r, "robot": sup.ids[r["robot"]], "cleared_after_s": r.get("cleared_after_s")}
+            for r in recoveries
+        ]
     result = {
         "scenario": scn.name,
         "seed": scn.seed,

@@ -74,6 +74,10 @@ class NavParams:
     #: With RVO a skid on its path aims its effective centre this far ahead on the path (a
     #: long lookahead, so that a sidestep does not turn into a pull back onto the path).
     rvo_lookahead_m: float = 3.0
+    #: Deadlocks with RVO: no progress of this much (m) for this long (s) bumps the priority.
+    rvo_progress_m: float = 0.1
+    rvo_stuck_s: float = 3.0
+    rvo_bump: float = 2.0
     #: Extra margin (m) around skids on the move in the velocity obstacles.
     rvo_margin_m: float = 0.1
     #: Horizon (s) of the velocity obstacles between skids: avoid this early.
@@ -138,6 +142,11 @@ class _RobotNav:
     settled: bool = False
     #: Side (+1 along the heading, -1 against it) this skid last made room to, or 0.
     room_side: int = 0
+    #: RVO deadlock watch: best remaining distance to the goal, when it was reached, and the
+    #: open recovery record (a priority bump) while the skid is stuck.
+    best_remaining: float = np.inf
+    best_t: float = 0.0
+    recovery: dict | None = None
     runup: bool = False
     runup_from: float = 0.0
     backup_left: float = 0.0
@@ -163,6 +172,8 @@ class Navigator:
         self._static_kd = None
         #: (N,) skids standing aside for another on purpose this tick (RVO; not deadlocked).
         self.making_room = np.zeros(0, dtype=bool)
+        #: Deadlock recoveries (RVO): robot index, start, action, time to clear.
+        self.recoveries: list[dict] = []
 
     # ------------------------------------------------------------------ helpers
 
@@ -394,7 +405,7 @@ class Navigator:
             aims, _ = self._targets(view, idx[cruising], p.rvo_lookahead_m)
             full = self._orca(view, full, idx[cruising], aims)
             moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
-            cmd[moving] = self._monitor(view, moving, full[moving], robots=False)
+            cmd[moving] = self._monitor(view, moving, full[moving])
             self._hold_outside(view, idx, cmd)
             self._track_stalls(view, idx, cmd)
             return cmd
@@ -835,6 +846,48 @@ class Navigator:
             )
         return speed, aside
 
+    def _deadlock_bumps(self, view: ControlView, settled: np.ndarray) -> np.ndarray:
+        """Detect and resolve deadlocks between skids on the move (RVO).
+
+        A skid with an unreached goal that has not come ``rvo_progress_m`` closer for
+        ``rvo_stuck_s`` is deadlocked (symmetric jams, where every ORCA solution is to wait).
+        It gets a priority bump of ``rvo_bump`` plus up to one more the nearer it is to its
+        goal, so the jam is ordered (nearest first, whatever the robots' order) and the others
+        make way; the bump ends when it makes progress again. Each episode is recorded in
+        :attr:`recoveries` with the time it took to clear.
+        """
+        p = self.params
+        bump = np.zeros(len(view.poses))
+        remaining = np.linalg.norm(view.goals[:, :2] - view.poses[:, :2], axis=1) + 0.3 * np.abs(
+            wrap_angle(view.goals[:, 2] - view.poses[:, 2])
+        )
+        for i in range(len(view.poses)):
+            nav = self._robots[i]
+            if view.goal_changed[i] or not view.active[i] or settled[i]:
+                nav.best_remaining, nav.best_t = remaining[i], view.t
+                if nav.recovery is not None and (not view.active[i] or settled[i]):
+                    self._close_recovery(nav, view.t)
+                continue
+            if remaining[i] < nav.best_remaining - p.rvo_progress_m:
+                nav.best_remaining, nav.best_t = remaining[i], view.t
+                if nav.recovery is not None:
+                    self._close_recovery(nav, view.t)
+            if view.t - nav.best_t >= p.rvo_stuck_s:
+                if nav.recovery is None:
+                    nav.recovery = {
+                        "robot": i,
+                        "start_s": round(view.t, 3),
+                        "action": "priority bump",
+                    }
+                    self.recoveries.append(nav.recovery)
+                bump[i] = p.rvo_bump * (1.0 + 1.0 / (1.0 + remaining[i]))
+        return bump
+
+    @staticmethod
+    def _close_recovery(nav: _RobotNav, t: float) -> None:
+        nav.recovery["cleared_after_s"] = round(t - nav.recovery["start_s"], 3)
+        nav.recovery = None
+
     def _corners_now(self, view: ControlView, i: int) -> np.ndarray:
         return footprint_corners(view.poses[i][None], self._plain[i][None])[0]
 
@@ -903,7 +956,9 @@ class Navigator:
             to_aim = aims[:, :2] - centres[cruising]
             dist = np.linalg.norm(to_aim, axis=1, keepdims=True)
             u_pref[cruising] = to_aim / np.maximum(dist, 1e-9) * u_lim[cruising, None]
-        prio = np.where(settled, p.parked_priority, view.priority)
+        prio = np.where(
+            settled, p.parked_priority, view.priority + self._deadlock_bumps(view, settled)
+        )
         prio = np.where(room != 0, p.room_priority, prio)
         axes = np.where(settled[:, None], h, np.nan)
         res = orca_step(

@@ -1,0 +1,90 @@
+"""Velocity obstacles in the loop (issue 5): the scenarios of the 2015 and 2018 papers run with
+``navigation: {avoidance: rvo}``, and the rules around them (axis-only yielding, e-stop)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from swarmpark.control.rvo import orca_step
+from swarmpark.geometry import Footprint, footprint_corners, rect_disc_gap
+from swarmpark.run import run_world
+from swarmpark.scenario import build_world, load_scenario, parse_scenario
+from swarmpark.supervisor import Supervisor
+
+ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def test_robots_held_on_their_axis_move_only_along_it():
+    skid = Footprint(1.2, 0.8, 0.6).corners_body()
+    # A parked skid (heading +y) right in front of a faster one coming along +x.
+    pos = np.array([[0.0, 0.0], [1.5, 0.3]])
+    shapes = np.stack([skid, np.column_stack([-skid[:, 1], skid[:, 0]])])
+    vel = np.array([[0.5, 0.0], [0.0, 0.0]])
+    axes = np.array([[np.nan, np.nan], [0.0, 1.0]])
+    res = orca_step(pos, vel, vel, 0.5, [10.0, 0.0], shapes, dt_s=0.05, axes=axes)
+    assert abs(res.velocities[1, 0]) < 1e-5  # no motion across its axis
+    assert abs(res.velocities[1, 1]) > 0.05  # but it does make room along it
+
+
+@pytest.mark.slow
+def test_fig6_pass_through_opens_and_restores_the_formation():
+    r = run_world(build_world(load_scenario(ROOT / "pass-through-fig6.yaml"))).result
+    assert r["success"] and r["collisions"] == []
+    robots = r["robots"]
+    assert robots["runner"]["final_position_error_m"] <= 0.1
+    # The rows beside the runner's lane opened (> 0.2 m) and every skid is back on its spot.
+    for rid in ("p21", "p22", "p23", "p31", "p32", "p33"):
+        assert robots[rid]["max_lateral_deviation_m"] > 0.2, rid
+    for rid, s in robots.items():
+        assert s["final_position_error_m"] <= 0.05, rid
+    assert r["deadlocks"] == []
+
+
+@pytest.mark.slow
+def test_fig11_lower_priority_takes_the_larger_detour():
+    r = run_world(build_world(load_scenario(ROOT / "head-on-fig11.yaml"))).result
+    assert r["success"] and r["collisions"] == []
+    low = r["robots"]["top"]["max_lateral_deviation_m"]
+    high = r["robots"]["bottom"]["max_lateral_deviation_m"]
+    assert low > 1.5 * high > 0.0
+    assert r["min_clearance_robot_m"] > 0.1
+
+
+@pytest.mark.slow
+def test_person_walks_through_the_formation_without_contact_and_it_restores():
+    world = build_world(load_scenario(ROOT / "person-through-formation.yaml"))
+    sup = Supervisor(world)
+    corners = [fp.corners_body() for fp in sup.sim.footprints]
+    start = sup.sim.poses.copy()
+    gap, moved = np.inf, np.zeros(sup.sim.n)
+    while not sup.settled() and sup.t < world.scenario.duration_s:
+        sup.tick()
+        c = footprint_corners(sup.sim.poses, np.stack(corners))
+        for pos, rad in zip(sup.sim.person_positions(), sup.sim.person_radius, strict=True):
+            gap = min(gap, float(rect_disc_gap(c, pos[None], np.full(len(c), rad)).min()))
+        moved = np.maximum(moved, np.linalg.norm(sup.sim.poses[:, :2] - start[:, :2], axis=1))
+    assert sup.settled() and sup.sim.people_done()
+    assert sup.metrics.collisions == []
+    assert gap > 0.05  # the person never came within 5 cm of a skid
+    assert moved.max() > 0.15  # skids in the walk made room ...
+    err = np.linalg.norm(sup.sim.poses[:, :2] - start[:, :2], axis=1)
+    assert err.max() <= 0.05  # ... and are back on their spots
+
+
+def test_estop_overrides_rvo_and_making_room():
+    data = yaml.safe_load((ROOT / "pass-through-fig6.yaml").read_text())
+    data["commands"].append({"at_s": 12.0, "estop": True})
+    data["duration_s"] = 14.0
+    sup = Supervisor(build_world(parse_scenario(data, ROOT)))
+    frozen = None
+    while sup.t < 13.95:
+        sup.tick()
+        if sup.t >= 12.1 - 1e-9:
+            if frozen is None:
+                frozen = sup.sim.poses.copy()
+            assert np.abs(sup.sim.vel).max() == 0.0
+            assert np.array_equal(sup.sim.poses, frozen)
+    # Before the stop the formation had started to open for the runner.
+    assert sup.metrics.collisions == []
