@@ -88,3 +88,15 @@ def test_estop_overrides_rvo_and_making_room():
             assert np.array_equal(sup.sim.poses, frozen)
     # Before the stop the formation had started to open for the runner.
     assert sup.metrics.collisions == []
+
+
+@pytest.mark.slow
+def test_fig8_two_skids_swap_rooms_through_the_door():
+    r = run_world(build_world(load_scenario(ROOT / "room-swap-fig8.yaml"))).result
+    assert r["success"] and r["collisions"] == []
+    assert r["robots"]["a"]["final_pose"][:2] == pytest.approx([17.6, 6.0], abs=0.1)
+    assert r["robots"]["b"]["final_pose"][:2] == pytest.approx([6.4, 4.0], abs=0.1)
+    # Every deadlock and every recovery the navigator applied is reported as cleared.
+    assert all(d["cleared_after_s"] is not None for d in r["deadlocks"])
+    assert all(rec["cleared_after_s"] is not None for rec in r["recoveries"])
+    assert {rec["action"] for rec in r["recoveries"]} <= {"priority bump"}
