@@ -96,7 +96,11 @@ def _min_speed(d1) -> float:
     for k, h in enumerate(widths):
         # |r'|^2 is a quartic; its extremes are at the real roots of its derivative.
         quartic = np.polyadd(np.polymul(c[:, k, 0], c[:, k, 0]), np.polymul(c[:, k, 1], c[:, k, 1]))
-        crit = np.roots(np.polyder(quartic)) if np.any(quartic[:-1]) else np.array([])
+        deriv = np.polyder(quartic)
+        # Leading coefficients that are round-off (denormal, say) would overflow the roots.
+        deriv[np.abs(deriv) <= 1e-12 * np.abs(deriv).max(initial=0.0)] = 0.0
+        deriv = np.trim_zeros(deriv, "f")
+        crit = np.roots(deriv) if len(deriv) > 1 else np.array([])
         crit = crit[np.abs(crit.imag) < 1e-12].real
         t = np.concatenate([[0.0, h], crit[(crit > 0) & (crit < h)]])
         best = min(best, float(np.sqrt(max(np.polyval(quartic, t).min(), 0.0))))
