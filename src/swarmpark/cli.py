@@ -125,6 +125,13 @@ def cmd_bench(args) -> int:
         _print_rows(rows)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    if args.only and out.exists():
+        # A partial run updates its benchmarks in the file and keeps the others.
+        try:
+            kept = json.loads(out.read_text()).get("benchmarks", {})
+        except (json.JSONDecodeError, AttributeError):
+            kept = {}
+        report["benchmarks"] = {**kept, **report["benchmarks"]}
     out.write_text(json.dumps(report, indent=2) + "\n")
     print(f"\nwrote {out}")
     return EXIT_OK
