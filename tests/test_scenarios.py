@@ -25,6 +25,12 @@ def test_scenario_meets_expectations(name):
                 assert s["final_position_error_m"] <= 0.10, rid
                 assert s["final_heading_error_deg"] <= 5.0, rid
         assert r["min_clearance_m"] > 0.0
+    if world.scenario.sensing.localization == "amcl":
+        loc = r["localization"]
+        assert loc["mean_error_m"] < 0.05
+        for k in loc.get("kidnaps", []):
+            assert k["error_after_m"] > 1.0  # really carried away
+            assert k["recovered_after_s"] is not None and k["recovered_after_s"] <= 10.0
 
 
 @pytest.mark.slow

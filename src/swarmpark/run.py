@@ -106,6 +106,19 @@ def check_expect(result: dict, expect) -> tuple[bool, list[str]]:
         tp = result["time_to_park_s"]
         if tp is None or tp > expect.max_time_to_park_s:
             fails.append(f"time_to_park_s {tp} > {expect.max_time_to_park_s}")
+    loc = result.get("localization") or {}
+    if expect.max_mean_localization_error_m is not None:
+        e = loc.get("mean_error_m")
+        if e is None or e > expect.max_mean_localization_error_m:
+            fails.append(f"localization mean_error_m {e} > {expect.max_mean_localization_error_m}")
+    if expect.max_recovery_s is not None:
+        for k in loc.get("kidnaps", []):
+            rs = k["recovered_after_s"]
+            if rs is None or rs > expect.max_recovery_s:
+                fails.append(
+                    f"kidnapped {k['robot']} at {k['at_s']} s: recovered_after_s {rs} "
+                    f"> {expect.max_recovery_s}"
+                )
     return not fails, fails
 
 

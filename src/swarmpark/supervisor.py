@@ -29,6 +29,10 @@ __all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
 ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
 #: Beams of each scan scored by the particle filter (a subsample, as AMCL's max_beams).
 AMCL_BEAMS = 240
+#: An estimate that jumps this far in one tick (a relocalized skid) makes the skid replan.
+ESTIMATE_JUMP_M = 0.5
+#: A kidnapped skid counts as found again once its error is below this (and stays).
+RECOVERED_ERROR_M = 0.1
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
 BLOCKING_MAX_GOALS = 40
@@ -115,6 +119,9 @@ class Supervisor:
         self.localizer = None
         self.estimates = self.sim.poses.copy()
         self.loc_errors: list[np.ndarray] = []
+        self.loc_times: list[float] = []
+        self.kidnapped: list[tuple[int, float]] = []  # (robot, time) of each kidnapping done
+        self._kidnaps = sorted(world.scenario.sensing.kidnap, key=lambda k: k.at_s)
         if world.scenario.sensing.localization == "amcl":
             self._start_localization()
         self._pending = sorted(
@@ -515,7 +522,7 @@ class Supervisor:
         """Per-skid AMCL on simulated scans and drifting odometry (2018 paper Sect. 3.5)."""
         from .geometry import pad_polygons, triangulate
         from .sense.lidar import LidarSpec, prepare_grid
-        from .sense.localize import FilterConfig, FleetLocalizer, LikelihoodField
+        from .sense.localize import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
 
         cfg = self.world.scenario.sensing
         self.lidar_spec = LidarSpec(
@@ -538,7 +545,9 @@ class Supervisor:
             self.sim.poses.copy(),
             rng=np.random.default_rng(loc_seed),
             footprint=self.sim.footprints[0],
-            config=FilterConfig(max_beams=AMCL_BEAMS),
+            config=FilterConfig(
+                max_beams=AMCL_BEAMS, alpha_fast=RECOVERY.alpha_fast if cfg.recovery else 0.0
+            ),
         )
         self.estimates = self.localizer.estimates.copy()
 
@@ -562,19 +571,65 @@ class Supervisor:
         )
         # Static obstacles are known but not in the map: their beams are not scored.
         known = self._obstacle_tris if len(self._obstacle_tris) else None
+        before = self.estimates
         self.estimates = self.localizer.step(sim.poses, ranges, known_polygons=known).copy()
+        # A skid whose estimate jumped (found again after a kidnapping) plans from where it is.
+        jumped = np.hypot(*(self.estimates[:, :2] - before[:, :2]).T) > ESTIMATE_JUMP_M
+        self.goal_changed |= jumped & self.has_goal
         self.loc_errors.append(self.localizer.errors(sim.poses)[0])
+        self.loc_times.append(sim.t)
+
+    def _run_due_kidnaps(self) -> None:
+        """Carry skids to their kidnap poses (the simulator's truth; odometry does not see it)."""
+        eps = 1e-9
+        while self._kidnaps and self._kidnaps[0].at_s <= self.t + eps:
+            kid = self._kidnaps.pop(0)
+            i = self.index[kid.robot]
+            pose = np.array([kid.pose[0], kid.pose[1], np.deg2rad(kid.pose[2])], float)
+            self.sim.poses[i] = pose
+            self.sim.vel[i] = 0.0
+            self.localizer.kidnap(i, pose[None])
+            self.metrics.moved_by_hand(i, pose)
+            self.kidnapped.append((i, self.t))
 
     def localization_summary(self) -> dict:
+        """Localization error over the run (position, m) and, per kidnapping, how long the
+        skid took to be found again (error below :data:`RECOVERED_ERROR_M` for good)."""
         if not self.loc_errors:
             return {}
         err = np.stack(self.loc_errors)
-        return {
+        t = np.asarray(self.loc_times)
+        out = {
             "method": "amcl",
+            "recovery": bool(self.world.scenario.sensing.recovery),
             "mean_error_m": round(float(err.mean()), 4),
             "max_error_m": round(float(err.max()), 4),
             "final_max_error_m": round(float(err[-1].max()), 4),
+            "per_robot_mean_error_m": {
+                rid: round(float(e), 4) for rid, e in zip(self.ids, err.mean(axis=0), strict=True)
+            },
         }
+        if self.kidnapped:
+            events = []
+            for k, (i, t0) in enumerate(self.kidnapped):
+                later = [t1 for j, t1 in self.kidnapped[k + 1 :] if j == i]
+                window = (t > t0) & (t < (later[0] if later else np.inf))
+                e, tw = err[window, i], t[window]
+                bad = np.flatnonzero(e >= RECOVERED_ERROR_M)
+                if len(e) == 0 or (len(bad) and bad[-1] == len(e) - 1):
+                    found = None  # still lost at the end of the window
+                else:
+                    found = float(tw[bad[-1] + 1] - t0) if len(bad) else float(tw[0] - t0)
+                events.append(
+                    {
+                        "robot": self.ids[i],
+                        "at_s": round(t0, 3),
+                        "error_after_m": round(float(e[0]), 4) if len(e) else None,
+                        "recovered_after_s": None if found is None else round(found, 3),
+                    }
+                )
+            out["kidnaps"] = events
+        return out
 
     def _run_due_commands(self) -> None:
         eps = 1e-9
@@ -656,6 +711,8 @@ class Supervisor:
     def tick(self):
         """One decision phase for every robot from one snapshot, then one move phase."""
         self._run_due_commands()
+        if self._kidnaps:
+            self._run_due_kidnaps()
         self._reassign()
         view = self.view()
         cmd = np.asarray(self.controller.compute(view), float).reshape(self.sim.n, 2)

@@ -648,7 +648,17 @@ class ParticleFilter:
         flat = np.full(len(cand), -np.log(len(cand)))
         beta = _temper(flat, ll, self.config.min_neff_ratio)
         lw = beta * ll
-        return cand[low_variance_resample(np.exp(lw - lw.max()), n, self.rng)]
+        out = cand[low_variance_resample(np.exp(lw - lw.max()), n, self.rng)]
+        # Each candidate stands for the cell of pose space around it (the pool is coarse: one
+        # candidate per ~0.2 m in a 150 m^2 room), and copies of one candidate would stay
+        # identical while the skid stands still (no motion noise): spread them over half the
+        # pool's spacing so the next scans can pick the best (a regularized particle filter).
+        area_m2 = len(self.field.free_cells) * self.field.resolution_m**2
+        h_xy = 0.5 * np.sqrt(area_m2 / len(cand))
+        h_yaw = 0.5 * 2 * np.pi / np.cbrt(len(cand))
+        out = out + self.rng.standard_normal((n, 3)) * np.array([h_xy, h_xy, h_yaw])
+        out[:, 2] = wrap_angle(out[:, 2])
+        return out
 
     def kidnap_reset(self) -> None:
         """Restart global localization (what an operator does for a robot moved by hand)."""
