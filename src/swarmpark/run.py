@@ -143,12 +143,20 @@ def write_outputs(out: RunOutput, out_dir: str | Path) -> dict[str, Path]:
         "png": out_dir / "run.png",
     }
     paths["result"].write_text(json.dumps(out.result, indent=2) + "\n")
+    sup = out.supervisor
+    # With AMCL: each tick's position error of every skid's estimate (m), and its time.
+    loc = (
+        {"loc_t_s": np.asarray(sup.loc_times), "loc_error_m": np.stack(sup.loc_errors)}
+        if sup.loc_errors
+        else {}
+    )
     np.savez_compressed(
         paths["trajectories"],
         t_s=out.times,
         poses=out.poses,
         people_xy=out.people,
-        robot_ids=np.array(out.supervisor.ids),
+        robot_ids=np.array(sup.ids),
+        **loc,
     )
     plot_run(out, paths["png"])
     return paths

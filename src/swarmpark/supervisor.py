@@ -609,6 +609,8 @@ class Supervisor:
                 rid: round(float(e), 4) for rid, e in zip(self.ids, err.mean(axis=0), strict=True)
             },
         }
+        if self.world.believed_grid is not None:
+            out["map_agreement"] = self._map_agreement()
         if self.kidnapped:
             events = []
             for k, (i, t0) in enumerate(self.kidnapped):
@@ -630,6 +632,17 @@ class Supervisor:
                 )
             out["kidnaps"] = events
         return out
+
+    def _map_agreement(self) -> dict | None:
+        """Agreement of the map the skids localize in (``sensing.map``) with the true map,
+        when the two share a grid (a map built by ``swarmpark map`` in the same world does)."""
+        from .sense.mapping import map_agreement
+
+        try:
+            agree = map_agreement(self.world.believed_grid, self.world.grid, tolerance_cells=1)
+        except ValueError:
+            return None  # a map of another extent or resolution: no cell-by-cell comparison
+        return {k: round(float(v), 4) for k, v in agree.items()}
 
     def _run_due_commands(self) -> None:
         eps = 1e-9
