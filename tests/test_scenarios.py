@@ -9,9 +9,10 @@ from swarmpark.run import run_world
 from swarmpark.scenario import build_world, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
-#: Run by tests/test_map_command.py on a map built afresh (here it would use the committed one).
-BUILT_MAP_RUNS = {"room-park-built.yaml"}
-SCENARIOS = sorted(p.name for p in ROOT.glob("*.yaml") if p.name not in BUILT_MAP_RUNS)
+#: Run with more checks elsewhere: room-park-built by tests/test_map_command.py on a map built
+#: afresh (here it would use the committed one), room-detect by tests/test_detection.py.
+RUN_ELSEWHERE = {"room-park-built.yaml", "room-detect.yaml"}
+SCENARIOS = sorted(p.name for p in ROOT.glob("*.yaml") if p.name not in RUN_ELSEWHERE)
 
 
 @pytest.mark.slow

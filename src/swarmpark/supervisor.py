@@ -33,6 +33,12 @@ AMCL_BEAMS = 240
 ESTIMATE_JUMP_M = 0.5
 #: A kidnapped skid counts as found again once its error is below this (and stays).
 RECOVERED_ERROR_M = 0.1
+#: With onboard sensing, the planner's map (the static map plus the detected obstacles) is
+#: refreshed this often (a costmap's update rate; planning itself is event-driven).
+DETECTION_PLAN_PERIOD_S = 1.0
+#: Detected obstacle cells go to the reactive layer (potential field, collision monitor, ORCA)
+#: as static solids: one square of this size for each square holding detected cells.
+DETECTION_SQUARE_M = 0.1
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
 BLOCKING_MAX_GOALS = 40
@@ -116,7 +122,9 @@ class Supervisor:
         # (ground truth until onboard sensing feeds detections into the costmap).
         base = world.believed_grid if world.believed_grid is not None else world.grid
         self.known_grid = base.with_polygons(list(world.static_obstacles))
+        self._base_grid = base
         self.localizer = None
+        self.costmap = None  # onboard obstacle detection (with sensing)
         self.estimates = self.sim.poses.copy()
         self.loc_errors: list[np.ndarray] = []
         self.loc_times: list[float] = []
@@ -550,6 +558,90 @@ class Supervisor:
             ),
         )
         self.estimates = self.localizer.estimates.copy()
+        # Obstacle detection (Hing 2018, Sect. 3.5.1): what the scans show and the map does not
+        # goes into the skids' costmap, and planning and avoidance use it instead of the
+        # scenario's obstacles and people (the simulator keeps those as the truth).
+        from .sense.costmap import LocalCostmap
+
+        self.costmap = LocalCostmap(self._base_grid, self.sim.n, self.lidar_spec)
+        self.known_grid = self._base_grid.copy()
+        self._detected_mask = np.zeros(self._base_grid.shape, dtype=bool)
+        self._plan_grid_t = -np.inf
+        pieces, owners = self.world.static_convex_pieces()
+        self._wall_pieces = pieces[np.array([o == "wall" for o in owners])]
+        self._detected_squares = np.zeros((0, 2), dtype=np.int64)
+        self._static_view = self._wall_pieces  # walls and detected squares, for the view
+
+    def _detect(self, ranges: np.ndarray) -> None:
+        """Feed the scans (less the returns from other skids, whose places the fleet knows) to
+        the costmap at the estimated poses; refresh the solids the reactive layer avoids and,
+        at :data:`DETECTION_PLAN_PERIOD_S`, the planner's map. Detections are shared by the
+        fleet (the union of every skid's costmap): the central controller plans for all."""
+        t = self.sim.t
+        others = self.localizer.other_skid_beams(ranges)
+        seen = ranges if others is None else np.where(others, np.nan, ranges)
+        self.costmap.update(t, self.estimates, seen)
+        cells = np.concatenate([self.costmap.obstacles(i, t).cells for i in range(self.sim.n)])
+        grid = self._base_grid
+        pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
+        squares = np.unique(np.floor(pts / DETECTION_SQUARE_M).astype(np.int64), axis=0)
+        if not np.array_equal(squares, self._detected_squares):
+            # Each square grown by half a cell covers the cells whose centres lie in it.
+            half = 0.5 * grid.resolution_m
+            lo = squares * DETECTION_SQUARE_M - half
+            hi = lo + DETECTION_SQUARE_M + 2 * half
+            boxes = np.stack(
+                [
+                    np.column_stack([lo[:, 0], lo[:, 1]]),
+                    np.column_stack([hi[:, 0], lo[:, 1]]),
+                    np.column_stack([hi[:, 0], hi[:, 1]]),
+                    np.column_stack([lo[:, 0], hi[:, 1]]),
+                ],
+                axis=1,
+            )
+            self._detected_squares = squares
+            self._static_view = np.concatenate([self._wall_pieces, boxes])
+        if t - self._plan_grid_t >= DETECTION_PLAN_PERIOD_S - 1e-9:
+            self._plan_grid_t = t
+            mask = np.zeros(grid.shape, dtype=bool)
+            if len(cells):
+                mask[cells[:, 0], cells[:, 1]] = True
+            if not np.array_equal(mask, self._detected_mask):
+                appeared = mask & ~self._detected_mask
+                self._detected_mask = mask
+                known = grid.copy()
+                known.occupied |= mask
+                known.unknown &= ~known.occupied
+                self.known_grid = known  # a new object: the navigator rebuilds its costmap
+                if appeared.any():
+                    self._replan_blocked(grid.cell_to_world(np.argwhere(appeared)))
+
+    def _replan_blocked(self, new_xy: np.ndarray) -> None:
+        """Make skids whose planned path (the part still ahead) runs within a skid's half width
+        (plus :data:`DETECTION_SQUARE_M`) of newly detected obstacle points plan again."""
+        from scipy.spatial import cKDTree
+
+        paths = getattr(self.controller, "paths", None)
+        if paths is None:
+            return
+        tree = cKDTree(new_xy)
+        for i, path in enumerate(paths()):
+            if path is None or len(path) < 2 or not self.has_goal[i]:
+                continue
+            path = np.asarray(path, float)[:, :2]
+            seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+            n = np.maximum(np.ceil(seg / DETECTION_SQUARE_M).astype(int), 1)
+            dense = np.vstack(
+                [
+                    a + np.linspace(0, 1, k, endpoint=False)[:, None] * (b - a)
+                    for a, b, k in zip(path[:-1], path[1:], n, strict=True)
+                ]
+                + [path[-1:]]
+            )
+            ahead = dense[int(np.argmin(np.hypot(*(dense - self.estimates[i, :2]).T))) :]
+            reach = self.sim.footprints[i].width_m / 2 + DETECTION_SQUARE_M
+            if np.isfinite(tree.query(ahead, distance_upper_bound=reach)[0]).any():
+                self.goal_changed[i] = True
 
     def _sense(self) -> None:
         """Scan from the true poses (the world as it is) and update every skid's estimate."""
@@ -578,6 +670,7 @@ class Supervisor:
         self.goal_changed |= jumped & self.has_goal
         self.loc_errors.append(self.localizer.errors(sim.poses)[0])
         self.loc_times.append(sim.t)
+        self._detect(ranges)
 
     def _run_due_kidnaps(self) -> None:
         """Carry skids to their kidnap poses (the simulator's truth; odometry does not see it)."""
@@ -673,9 +766,17 @@ class Supervisor:
 
     def view(self) -> ControlView:
         sim = self.sim
-        ppos = sim.person_positions()
-        pvel = np.zeros_like(ppos)
-        if len(ppos):
+        if self.costmap is not None:
+            # Onboard sensing: avoid the walls and what the scans detected (people included,
+            # as still obstacles refreshed every scan), not the scenario's obstacles and people.
+            ppos, prad = np.zeros((0, 2)), np.zeros(0)
+            pvel = np.zeros_like(ppos)
+            static_pieces = self._static_view
+        else:
+            ppos, prad = sim.person_positions(), sim.person_radius
+            pvel = np.zeros_like(ppos)
+            static_pieces = sim.static_pieces
+        if len(ppos) and self.costmap is None:
             ahead = sim.person_positions(sim.person_s + 1e-3)
             moving = self._people_walking()
             speed = np.array([p.speed_mps for p in sim.people])
@@ -703,8 +804,8 @@ class Supervisor:
             grid=self.known_grid,
             people_xy=ppos,
             people_vel=pvel,
-            people_radius=sim.person_radius,
-            static_pieces=sim.static_pieces,
+            people_radius=prad,
+            static_pieces=static_pieces,
             goal_changed=self.goal_changed.copy(),
             hold=self.held(),
             stopped=self.stopped | self.teleop | self.estopped,
