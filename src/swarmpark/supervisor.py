@@ -142,6 +142,13 @@ class Supervisor:
     def t(self) -> float:
         return self.sim.t
 
+    @property
+    def poses_known(self) -> np.ndarray:
+        """The poses the controller decides from: the skids' estimates when they localize
+        onboard (``sensing.localization: amcl``), else the true poses. Metrics and the
+        parked/settled checks always use the true poses."""
+        return self.estimates if self.localizer is not None else self.sim.poses
+
     def modes(self) -> list[str]:
         """Per-robot state: idle, moving, parked, stopped, estopped, teleop or stuck."""
         pos_err, head_err = goal_errors(self.sim.poses, self.goals)
@@ -216,7 +223,7 @@ class Supervisor:
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.world.robots[i].footprint for i in idx]
         # The skids enter from their side: the opening is the boundary point nearest to them.
-        centroid = Point(self.sim.poses[idx, :2].mean(axis=0))
+        centroid = Point(self.poses_known[idx, :2].mean(axis=0))
         opening = nearest_points(boundary.exterior, centroid)[0]
         lay = layout(
             boundary,
@@ -352,7 +359,7 @@ class Supervisor:
         for g in self.groups:
             if not g.blocks or not any(g.blocks):
                 continue
-            pos_err, head_err = goal_errors(self.sim.poses[g.robots], g.goals[g.goal_of])
+            pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[g.goal_of])
             parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
             filled = np.zeros(len(g.goals), dtype=bool)
             filled[g.goal_of[parked]] = True
@@ -374,7 +381,7 @@ class Supervisor:
         if cost == "path":
             lengths = self.controller_path_lengths(idx, goals)
         return assign_mod.cost_matrix(
-            self.sim.poses[idx, :2], goals[:, :2], cost, path_lengths=lengths, fits=fits
+            self.poses_known[idx, :2], goals[:, :2], cost, path_lengths=lengths, fits=fits
         )
 
     def controller_path_lengths(self, idx: np.ndarray, goals: np.ndarray) -> np.ndarray:
@@ -383,7 +390,7 @@ class Supervisor:
 
         widths = [self.world.robots[i].footprint.width_m for i in idx]
         cm = build_costmap(self.world.grid, min(widths) / 2, min(widths) / 2)
-        return path_length_matrix(cm, self.sim.poses[idx, :2], goals[:, :2])
+        return path_length_matrix(cm, self.poses_known[idx, :2], goals[:, :2])
 
     def goto(self, cmd: GotoCmd) -> Outcome:
         if cmd.robot not in self.index:
@@ -430,7 +437,7 @@ class Supervisor:
         try:
             run = FormationRun.start(
                 idx,
-                self.sim.poses[idx],
+                self.poses_known[idx],
                 [self.world.robots[i].footprint for i in idx],
                 self.sim.max_speed[idx],
                 self.sim.max_accel[idx],
@@ -753,7 +760,7 @@ class Supervisor:
             if g.cost == "path":
                 continue  # path costs are recomputed on replans only (Dijkstra per goal)
             cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
-            pos_err, head_err = goal_errors(self.sim.poses[g.robots], g.goals[g.goal_of])
+            pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[g.goal_of])
             locked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
             try:
                 new, changed = assign_mod.reassign(cost, g.goal_of, locked)
@@ -836,7 +843,7 @@ class Supervisor:
                 go = ~self.stopped[f.idx] & ~self.teleop[f.idx] & (not self.estopped)
                 fc = f.command(
                     self.t,
-                    self.sim.poses[f.idx],
+                    self.poses_known[f.idx],
                     view.people_xy,
                     self.sim.max_speed[f.idx],
                     self.sim.max_yaw_rate[f.idx],
