@@ -122,6 +122,30 @@ def test_relative_motion_turn_in_place():
     assert (float(rot1), float(trans), float(rot2)) == pytest.approx((0.0, 0.0, 1.0))
 
 
+def test_short_steps_backwards_move_backwards():
+    """A skid reversing at 0.1 m/s at 20 Hz (5 mm steps, below the heading threshold): its
+    odometry and its particles go back, not forward (they went forward before the fix)."""
+    true = np.column_stack([2.0 - 0.005 * np.arange(201), np.full(201, 1.0), np.zeros(201)])
+    rot1, trans, _ = relative_motion(true[0], true[1])
+    assert float(rot1) == pytest.approx(np.pi) and float(trans) == pytest.approx(0.005)
+    odo = OdometryDrift(true[:1], rng=np.random.default_rng(0), **NO_ODOMETRY_ERROR)
+    g = grid_from_walls((4.0, 2.0), 0.05, [])
+    pf = ParticleFilter(
+        LikelihoodField(g),
+        LidarSpec(num_beams=36),
+        rng=np.random.default_rng(1),
+        initial_pose=true[0],
+        initial_std=(0.0, 0.0, 0.0),
+    )
+    prev = true[0]
+    for pose in true[1:]:
+        odom = odo.step(pose[None])[0]
+        pf.predict(prev, odom)
+        prev = odom
+    np.testing.assert_allclose(odom, true[-1], atol=1e-9)
+    assert pf.estimate().pose[0] == pytest.approx(1.0, abs=0.05)
+
+
 def test_weights_stay_normalized_and_nonnegative():
     g = asymmetric_room()
     spec = LidarSpec(range_noise_std_m=0.01)

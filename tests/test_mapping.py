@@ -231,7 +231,23 @@ def test_bad_inputs_are_refused():
         MapperConfig(l_occ=-1.0)
     with pytest.raises(ValueError, match="mapper.match_min_dist_m"):
         MapperConfig(match_min_dist_m=1.0, match_max_dist_m=0.5)
+    with pytest.raises(ValueError, match="mapper.insert_min_d_m"):
+        MapperConfig(insert_min_d_m=-0.1)
     with pytest.raises(ValueError, match="mapper.resolution_m"):
         GridMapper((10, 10), 0.0, spec=SPEC)
     with pytest.raises(ValueError, match="free_thresh"):
         GridMapper.like(g, spec=SPEC).to_occupancy_grid(occupied_thresh=0.1, free_thresh=0.2)
+
+
+def test_scans_are_matched_every_step_but_inserted_every_half_metre():
+    """Keyframes (GMapping's linearUpdate): 4 m of driving in 5 cm steps is 80 scans matched,
+    but only about one inserted per 0.5 m; the pose is still tracked at every step."""
+    g = prepare_grid(asymmetric_room())
+    route = drive([[1.0, 3.5], [5.0, 3.5]], v=0.5, dt=0.1)
+    mapper = GridMapper.like(asymmetric_room(), spec=SPEC)
+    rng = np.random.default_rng(0)
+    for p in route:
+        mapper.update(p, scan(SPEC, p[None], g, rng=rng)[0])
+        assert np.hypot(*(mapper.pose[:2] - p[:2])) < 0.02
+    assert len(route) >= 79
+    assert 8 <= mapper.scans <= 10  # the first scan, then one per 0.5 m

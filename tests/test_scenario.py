@@ -134,3 +134,39 @@ def test_shipped_scenarios_load():
     assert files, "no scenarios shipped"
     for f in files:
         build_world(load_scenario(f))
+
+
+AMCL = {"localization": "amcl", "recovery": True}
+
+
+@pytest.mark.parametrize(
+    "sensing, message",
+    [
+        (
+            {"kidnap": [{"robot": "a", "at_s": 1, "pose": [5, 3, 0]}]},
+            "sensing.kidnap: needs sensing.localization 'amcl' (got 'truth')",
+        ),
+        (
+            {**AMCL, "kidnap": [{"robot": "zz", "at_s": 1, "pose": [5, 3, 0]}]},
+            "sensing.kidnap[0].robot: unknown robot (got 'zz')",
+        ),
+        (
+            {**AMCL, "kidnap": [{"robot": "a", "at_s": 99, "pose": [5, 3, 0]}]},
+            "sensing.kidnap[0].at_s: after the end of the run, duration_s 20.0 (got 99.0)",
+        ),
+        (
+            {**AMCL, "kidnap": [{"robot": "a", "at_s": 1, "pose": [0.1, 3, 0]}]},
+            "sensing.kidnap[0].pose: robot 'a' would be inside a wall (got [0.1, 3.0, 0.0])",
+        ),
+        (
+            {**AMCL, "kidnap": [{"robot": "a", "at_s": 1, "pose": [5, 3]}]},
+            "sensing.kidnap[0].pose: List should have at least 3 items",
+        ),
+        (
+            {**AMCL, "kidnap": [{"robot": "a", "at_s": 1, "pose": [5, 3, 0], "when": 2}]},
+            "sensing.kidnap[0].when: unknown key (value 2)",
+        ),
+    ],
+)
+def test_bad_kidnap_names_the_field_and_value(sensing, message):
+    assert error_of(with_(sensing=sensing, duration_s=20)).startswith(message)

@@ -74,7 +74,8 @@ def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> di
     return {
         "robot": robot,
         "map": str(path),
-        "scans": mapper.scans,
+        "scans": len(drift),
+        "keyframes": mapper.scans,
         "sim_time_s": round(sup.t, 3),
         "odometry_drift_final_m": round(float(drift[-1]), 4) if drift else None,
         "slam_error_final_m": round(float(corrected[-1]), 4) if corrected else None,

@@ -158,6 +158,10 @@ class MetricsRecorder:
                 dl.resolved_by = "progress" if improved[i] or inside[i] else "paused"
                 self._deadlock[i] = None
 
+    def moved_by_hand(self, i: int, pose: np.ndarray) -> None:
+        """Robot ``i`` was carried to ``pose``: the jump is not driven path length."""
+        self._prev[i] = np.asarray(pose, float)
+
     def stuck(self) -> np.ndarray:
         """Robots currently in a deadlock."""
         return np.array([d is not None for d in self._deadlock], dtype=bool)

@@ -114,6 +114,19 @@ def check_expect(result: dict, expect) -> tuple[bool, list[str]]:
         tp = result["time_to_park_s"]
         if tp is None or tp > expect.max_time_to_park_s:
             fails.append(f"time_to_park_s {tp} > {expect.max_time_to_park_s}")
+    loc = result.get("localization") or {}
+    if expect.max_mean_localization_error_m is not None:
+        e = loc.get("mean_error_m")
+        if e is None or e > expect.max_mean_localization_error_m:
+            fails.append(f"localization mean_error_m {e} > {expect.max_mean_localization_error_m}")
+    if expect.max_recovery_s is not None:
+        for k in loc.get("kidnaps", []):
+            rs = k["recovered_after_s"]
+            if rs is None or rs > expect.max_recovery_s:
+                fails.append(
+                    f"kidnapped {k['robot']} at {k['at_s']} s: recovered_after_s {rs} "
+                    f"> {expect.max_recovery_s}"
+                )
     return not fails, fails
 
 
@@ -138,12 +151,20 @@ def write_outputs(out: RunOutput, out_dir: str | Path) -> dict[str, Path]:
         "png": out_dir / "run.png",
     }
     paths["result"].write_text(json.dumps(out.result, indent=2) + "\n")
+    sup = out.supervisor
+    # With AMCL: each tick's position error of every skid's estimate (m), and its time.
+    loc = (
+        {"loc_t_s": np.asarray(sup.loc_times), "loc_error_m": np.stack(sup.loc_errors)}
+        if sup.loc_errors
+        else {}
+    )
     np.savez_compressed(
         paths["trajectories"],
         t_s=out.times,
         poses=out.poses,
         people_xy=out.people,
-        robot_ids=np.array(out.supervisor.ids),
+        robot_ids=np.array(sup.ids),
+        **loc,
     )
     plot_run(out, paths["png"])
     return paths

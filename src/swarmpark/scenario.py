@@ -34,6 +34,7 @@ __all__ = [
     "World",
     "RobotConfig",
     "Person",
+    "KidnapSpec",
     "load_scenario",
     "parse_scenario",
     "build_world",
@@ -182,6 +183,10 @@ class ExpectSpec(_Model):
     max_collisions: Annotated[int, Field(ge=0)] | None = None
     min_clearance_m: float | None = None
     max_time_to_park_s: PositiveFloat | None = None
+    #: With ``sensing.localization: amcl``: bound on the run's mean localization error.
+    max_mean_localization_error_m: PositiveFloat | None = None
+    #: With kidnappings: every kidnapped skid is found again within this many seconds.
+    max_recovery_s: PositiveFloat | None = None
 
 
 class NavigationSpec(_Model):
@@ -191,10 +196,21 @@ class NavigationSpec(_Model):
     avoidance: Literal["monitor", "rvo"] = "monitor"
 
 
+class KidnapSpec(_Model):
+    """At ``at_s`` a skid is carried (by hand, without its odometry noticing) to ``pose``
+    (x, y, heading in degrees); its filter must find it again."""
+
+    robot: str
+    at_s: NonNegFloat
+    pose: PoseDeg
+
+
 class SensingSpec(_Model):
     """Onboard sensing. ``localization: amcl`` makes every skid localize with its own LIDAR
     and drifting odometry (particle filter against the map); control then uses the estimates
-    and the run result reports the localization error. ``truth`` uses the true poses."""
+    and the run result reports the localization error. ``truth`` uses the true poses.
+    ``recovery`` turns on augmented MCL (injected particles when the scans stop fitting,
+    which finds a kidnapped skid); ``kidnap`` moves skids during the run to test it."""
 
     localization: Literal["truth", "amcl"] = "truth"
     #: The map the skids localize and plan in (map_server YAML, e.g. one built by
@@ -205,6 +221,8 @@ class SensingSpec(_Model):
     lidar_range_m: PositiveFloat = 5.0
     range_noise_std_m: NonNegFloat = 0.01
     dropout_prob: Annotated[float, Field(ge=0, lt=1)] = 0.0
+    recovery: bool = False
+    kidnap: list[KidnapSpec] = []
 
 
 class Scenario(_Model):
@@ -458,7 +476,37 @@ def build_world(scn: Scenario) -> World:
     )
     _check_start_poses(world)
     _check_commands(world)
+    _check_kidnaps(world)
     return world
+
+
+def _check_kidnaps(world: World) -> None:
+    sensing = world.scenario.sensing
+    if sensing.kidnap and sensing.localization != "amcl":
+        raise ScenarioError(
+            f"sensing.kidnap: needs sensing.localization 'amcl' (got {sensing.localization!r})"
+        )
+    ids = world.ids
+    pieces, owners = world.static_convex_pieces()
+    for k, kid in enumerate(sensing.kidnap):
+        f = f"sensing.kidnap[{k}]"
+        if kid.robot not in ids:
+            raise ScenarioError(f"{f}.robot: unknown robot (got {kid.robot!r})")
+        if kid.at_s > world.scenario.duration_s:
+            raise ScenarioError(
+                f"{f}.at_s: after the end of the run, duration_s {world.scenario.duration_s} "
+                f"(got {kid.at_s})"
+            )
+        pose = np.array([kid.pose[0], kid.pose[1], np.deg2rad(kid.pose[2])], float)
+        fp = world.robots[ids.index(kid.robot)].footprint
+        corners = footprint_corners(pose[None], body_corners([fp]))
+        gap = convex_gap(np.repeat(corners, len(pieces), axis=0), pieces)
+        if np.any(gap < 0):
+            what = owners[int(np.argmin(gap))].replace(":", " ")
+            where = "a wall" if what == "wall" else what
+            raise ScenarioError(
+                f"{f}.pose: robot {kid.robot!r} would be inside {where} (got {kid.pose})"
+            )
 
 
 def _check_start_poses(world: World) -> None:

@@ -29,6 +29,16 @@ __all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
 ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
 #: Beams of each scan scored by the particle filter (a subsample, as AMCL's max_beams).
 AMCL_BEAMS = 240
+#: An estimate that jumps this far in one tick (a relocalized skid) makes the skid replan.
+ESTIMATE_JUMP_M = 0.5
+#: A kidnapped skid counts as found again once its error is below this (and stays).
+RECOVERED_ERROR_M = 0.1
+#: With onboard sensing, the planner's map (the static map plus the detected obstacles) is
+#: refreshed this often (a costmap's update rate; planning itself is event-driven).
+DETECTION_PLAN_PERIOD_S = 1.0
+#: Detected obstacle cells go to the reactive layer (potential field, collision monitor, ORCA)
+#: as static solids: one square of this size for each square holding detected cells.
+DETECTION_SQUARE_M = 0.1
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
 BLOCKING_MAX_GOALS = 40
@@ -112,9 +122,14 @@ class Supervisor:
         # (ground truth until onboard sensing feeds detections into the costmap).
         base = world.believed_grid if world.believed_grid is not None else world.grid
         self.known_grid = base.with_polygons(list(world.static_obstacles))
+        self._base_grid = base
         self.localizer = None
+        self.costmap = None  # onboard obstacle detection (with sensing)
         self.estimates = self.sim.poses.copy()
         self.loc_errors: list[np.ndarray] = []
+        self.loc_times: list[float] = []
+        self.kidnapped: list[tuple[int, float]] = []  # (robot, time) of each kidnapping done
+        self._kidnaps = sorted(world.scenario.sensing.kidnap, key=lambda k: k.at_s)
         if world.scenario.sensing.localization == "amcl":
             self._start_localization()
         self._pending = sorted(
@@ -126,6 +141,13 @@ class Supervisor:
     @property
     def t(self) -> float:
         return self.sim.t
+
+    @property
+    def poses_known(self) -> np.ndarray:
+        """The poses the controller decides from: the skids' estimates when they localize
+        onboard (``sensing.localization: amcl``), else the true poses. Metrics and the
+        parked/settled checks always use the true poses."""
+        return self.estimates if self.localizer is not None else self.sim.poses
 
     def modes(self) -> list[str]:
         """Per-robot state: idle, moving, parked, stopped, estopped, teleop or stuck."""
@@ -201,7 +223,7 @@ class Supervisor:
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.world.robots[i].footprint for i in idx]
         # The skids enter from their side: the opening is the boundary point nearest to them.
-        centroid = Point(self.sim.poses[idx, :2].mean(axis=0))
+        centroid = Point(self.poses_known[idx, :2].mean(axis=0))
         opening = nearest_points(boundary.exterior, centroid)[0]
         lay = layout(
             boundary,
@@ -337,7 +359,7 @@ class Supervisor:
         for g in self.groups:
             if not g.blocks or not any(g.blocks):
                 continue
-            pos_err, head_err = goal_errors(self.sim.poses[g.robots], g.goals[g.goal_of])
+            pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[g.goal_of])
             parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
             filled = np.zeros(len(g.goals), dtype=bool)
             filled[g.goal_of[parked]] = True
@@ -359,7 +381,7 @@ class Supervisor:
         if cost == "path":
             lengths = self.controller_path_lengths(idx, goals)
         return assign_mod.cost_matrix(
-            self.sim.poses[idx, :2], goals[:, :2], cost, path_lengths=lengths, fits=fits
+            self.poses_known[idx, :2], goals[:, :2], cost, path_lengths=lengths, fits=fits
         )
 
     def controller_path_lengths(self, idx: np.ndarray, goals: np.ndarray) -> np.ndarray:
@@ -368,7 +390,7 @@ class Supervisor:
 
         widths = [self.world.robots[i].footprint.width_m for i in idx]
         cm = build_costmap(self.world.grid, min(widths) / 2, min(widths) / 2)
-        return path_length_matrix(cm, self.sim.poses[idx, :2], goals[:, :2])
+        return path_length_matrix(cm, self.poses_known[idx, :2], goals[:, :2])
 
     def goto(self, cmd: GotoCmd) -> Outcome:
         if cmd.robot not in self.index:
@@ -415,7 +437,7 @@ class Supervisor:
         try:
             run = FormationRun.start(
                 idx,
-                self.sim.poses[idx],
+                self.poses_known[idx],
                 [self.world.robots[i].footprint for i in idx],
                 self.sim.max_speed[idx],
                 self.sim.max_accel[idx],
@@ -515,7 +537,7 @@ class Supervisor:
         """Per-skid AMCL on simulated scans and drifting odometry (2018 paper Sect. 3.5)."""
         from .geometry import pad_polygons, triangulate
         from .sense.lidar import LidarSpec, prepare_grid
-        from .sense.localize import FilterConfig, FleetLocalizer, LikelihoodField
+        from .sense.localize import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
 
         cfg = self.world.scenario.sensing
         self.lidar_spec = LidarSpec(
@@ -538,9 +560,95 @@ class Supervisor:
             self.sim.poses.copy(),
             rng=np.random.default_rng(loc_seed),
             footprint=self.sim.footprints[0],
-            config=FilterConfig(max_beams=AMCL_BEAMS),
+            config=FilterConfig(
+                max_beams=AMCL_BEAMS, alpha_fast=RECOVERY.alpha_fast if cfg.recovery else 0.0
+            ),
         )
         self.estimates = self.localizer.estimates.copy()
+        # Obstacle detection (Hing 2018, Sect. 3.5.1): what the scans show and the map does not
+        # goes into the skids' costmap, and planning and avoidance use it instead of the
+        # scenario's obstacles and people (the simulator keeps those as the truth).
+        from .sense.costmap import LocalCostmap
+
+        self.costmap = LocalCostmap(self._base_grid, self.sim.n, self.lidar_spec)
+        self.known_grid = self._base_grid.copy()
+        self._detected_mask = np.zeros(self._base_grid.shape, dtype=bool)
+        self._plan_grid_t = -np.inf
+        pieces, owners = self.world.static_convex_pieces()
+        self._wall_pieces = pieces[np.array([o == "wall" for o in owners])]
+        self._detected_squares = np.zeros((0, 2), dtype=np.int64)
+        self._static_view = self._wall_pieces  # walls and detected squares, for the view
+
+    def _detect(self, ranges: np.ndarray) -> None:
+        """Feed the scans (less the returns from other skids, whose places the fleet knows) to
+        the costmap at the estimated poses; refresh the solids the reactive layer avoids and,
+        at :data:`DETECTION_PLAN_PERIOD_S`, the planner's map. Detections are shared by the
+        fleet (the union of every skid's costmap): the central controller plans for all."""
+        t = self.sim.t
+        others = self.localizer.other_skid_beams(ranges)
+        seen = ranges if others is None else np.where(others, np.nan, ranges)
+        self.costmap.update(t, self.estimates, seen)
+        cells = np.concatenate([self.costmap.obstacles(i, t).cells for i in range(self.sim.n)])
+        grid = self._base_grid
+        pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
+        squares = np.unique(np.floor(pts / DETECTION_SQUARE_M).astype(np.int64), axis=0)
+        if not np.array_equal(squares, self._detected_squares):
+            # Each square grown by half a cell covers the cells whose centres lie in it.
+            half = 0.5 * grid.resolution_m
+            lo = squares * DETECTION_SQUARE_M - half
+            hi = lo + DETECTION_SQUARE_M + 2 * half
+            boxes = np.stack(
+                [
+                    np.column_stack([lo[:, 0], lo[:, 1]]),
+                    np.column_stack([hi[:, 0], lo[:, 1]]),
+                    np.column_stack([hi[:, 0], hi[:, 1]]),
+                    np.column_stack([lo[:, 0], hi[:, 1]]),
+                ],
+                axis=1,
+            )
+            self._detected_squares = squares
+            self._static_view = np.concatenate([self._wall_pieces, boxes])
+        if t - self._plan_grid_t >= DETECTION_PLAN_PERIOD_S - 1e-9:
+            self._plan_grid_t = t
+            mask = np.zeros(grid.shape, dtype=bool)
+            if len(cells):
+                mask[cells[:, 0], cells[:, 1]] = True
+            if not np.array_equal(mask, self._detected_mask):
+                appeared = mask & ~self._detected_mask
+                self._detected_mask = mask
+                known = grid.copy()
+                known.occupied |= mask
+                known.unknown &= ~known.occupied
+                self.known_grid = known  # a new object: the navigator rebuilds its costmap
+                if appeared.any():
+                    self._replan_blocked(grid.cell_to_world(np.argwhere(appeared)))
+
+    def _replan_blocked(self, new_xy: np.ndarray) -> None:
+        """Make skids whose planned path (the part still ahead) runs within a skid's half width
+        (plus :data:`DETECTION_SQUARE_M`) of newly detected obstacle points plan again."""
+        from scipy.spatial import cKDTree
+
+        paths = getattr(self.controller, "paths", None)
+        if paths is None:
+            return
+        tree = cKDTree(new_xy)
+        for i, path in enumerate(paths()):
+            if path is None or len(path) < 2 or not self.has_goal[i]:
+                continue
+            path = np.asarray(path, float)[:, :2]
+            seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+            n = np.maximum(np.ceil(seg / DETECTION_SQUARE_M).astype(int), 1)
+            dense = np.vstack(
+                [
+                    a + np.linspace(0, 1, k, endpoint=False)[:, None] * (b - a)
+                    for a, b, k in zip(path[:-1], path[1:], n, strict=True)
+                ]
+                + [path[-1:]]
+            )
+            ahead = dense[int(np.argmin(np.hypot(*(dense - self.estimates[i, :2]).T))) :]
+            reach = self.sim.footprints[i].width_m / 2 + DETECTION_SQUARE_M
+            if np.isfinite(tree.query(ahead, distance_upper_bound=reach)[0]).any():
+                self.goal_changed[i] = True
 
     def _sense(self) -> None:
         """Scan from the true poses (the world as it is) and update every skid's estimate."""
@@ -562,19 +670,79 @@ class Supervisor:
         )
         # Static obstacles are known but not in the map: their beams are not scored.
         known = self._obstacle_tris if len(self._obstacle_tris) else None
+        before = self.estimates
         self.estimates = self.localizer.step(sim.poses, ranges, known_polygons=known).copy()
+        # A skid whose estimate jumped (found again after a kidnapping) plans from where it is.
+        jumped = np.hypot(*(self.estimates[:, :2] - before[:, :2]).T) > ESTIMATE_JUMP_M
+        self.goal_changed |= jumped & self.has_goal
         self.loc_errors.append(self.localizer.errors(sim.poses)[0])
+        self.loc_times.append(sim.t)
+        self._detect(ranges)
+
+    def _run_due_kidnaps(self) -> None:
+        """Carry skids to their kidnap poses (the simulator's truth; odometry does not see it)."""
+        eps = 1e-9
+        while self._kidnaps and self._kidnaps[0].at_s <= self.t + eps:
+            kid = self._kidnaps.pop(0)
+            i = self.index[kid.robot]
+            pose = np.array([kid.pose[0], kid.pose[1], np.deg2rad(kid.pose[2])], float)
+            self.sim.poses[i] = pose
+            self.sim.vel[i] = 0.0
+            self.localizer.kidnap(i, pose[None])
+            self.metrics.moved_by_hand(i, pose)
+            self.kidnapped.append((i, self.t))
 
     def localization_summary(self) -> dict:
+        """Localization error over the run (position, m) and, per kidnapping, how long the
+        skid took to be found again (error below :data:`RECOVERED_ERROR_M` for good)."""
         if not self.loc_errors:
             return {}
         err = np.stack(self.loc_errors)
-        return {
+        t = np.asarray(self.loc_times)
+        out = {
             "method": "amcl",
+            "recovery": bool(self.world.scenario.sensing.recovery),
             "mean_error_m": round(float(err.mean()), 4),
             "max_error_m": round(float(err.max()), 4),
             "final_max_error_m": round(float(err[-1].max()), 4),
+            "per_robot_mean_error_m": {
+                rid: round(float(e), 4) for rid, e in zip(self.ids, err.mean(axis=0), strict=True)
+            },
         }
+        if self.world.believed_grid is not None:
+            out["map_agreement"] = self._map_agreement()
+        if self.kidnapped:
+            events = []
+            for k, (i, t0) in enumerate(self.kidnapped):
+                later = [t1 for j, t1 in self.kidnapped[k + 1 :] if j == i]
+                window = (t > t0) & (t < (later[0] if later else np.inf))
+                e, tw = err[window, i], t[window]
+                bad = np.flatnonzero(e >= RECOVERED_ERROR_M)
+                if len(e) == 0 or (len(bad) and bad[-1] == len(e) - 1):
+                    found = None  # still lost at the end of the window
+                else:
+                    found = float(tw[bad[-1] + 1] - t0) if len(bad) else float(tw[0] - t0)
+                events.append(
+                    {
+                        "robot": self.ids[i],
+                        "at_s": round(t0, 3),
+                        "error_after_m": round(float(e[0]), 4) if len(e) else None,
+                        "recovered_after_s": None if found is None else round(found, 3),
+                    }
+                )
+            out["kidnaps"] = events
+        return out
+
+    def _map_agreement(self) -> dict | None:
+        """Agreement of the map the skids localize in (``sensing.map``) with the true map,
+        when the two share a grid (a map built by ``swarmpark map`` in the same world does)."""
+        from .sense.mapping import map_agreement
+
+        try:
+            agree = map_agreement(self.world.believed_grid, self.world.grid, tolerance_cells=1)
+        except ValueError:
+            return None  # a map of another extent or resolution: no cell-by-cell comparison
+        return {k: round(float(v), 4) for k, v in agree.items()}
 
     def _run_due_commands(self) -> None:
         eps = 1e-9
@@ -592,7 +760,7 @@ class Supervisor:
             if g.cost == "path":
                 continue  # path costs are recomputed on replans only (Dijkstra per goal)
             cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
-            pos_err, head_err = goal_errors(self.sim.poses[g.robots], g.goals[g.goal_of])
+            pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[g.goal_of])
             locked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
             try:
                 new, changed = assign_mod.reassign(cost, g.goal_of, locked)
@@ -605,9 +773,17 @@ class Supervisor:
 
     def view(self) -> ControlView:
         sim = self.sim
-        ppos = sim.person_positions()
-        pvel = np.zeros_like(ppos)
-        if len(ppos):
+        if self.costmap is not None:
+            # Onboard sensing: avoid the walls and what the scans detected (people included,
+            # as still obstacles refreshed every scan), not the scenario's obstacles and people.
+            ppos, prad = np.zeros((0, 2)), np.zeros(0)
+            pvel = np.zeros_like(ppos)
+            static_pieces = self._static_view
+        else:
+            ppos, prad = sim.person_positions(), sim.person_radius
+            pvel = np.zeros_like(ppos)
+            static_pieces = sim.static_pieces
+        if len(ppos) and self.costmap is None:
             ahead = sim.person_positions(sim.person_s + 1e-3)
             moving = self._people_walking()
             speed = np.array([p.speed_mps for p in sim.people])
@@ -635,8 +811,8 @@ class Supervisor:
             grid=self.known_grid,
             people_xy=ppos,
             people_vel=pvel,
-            people_radius=sim.person_radius,
-            static_pieces=sim.static_pieces,
+            people_radius=prad,
+            static_pieces=static_pieces,
             goal_changed=self.goal_changed.copy(),
             hold=self.held(),
             stopped=self.stopped | self.teleop | self.estopped,
@@ -656,6 +832,8 @@ class Supervisor:
     def tick(self):
         """One decision phase for every robot from one snapshot, then one move phase."""
         self._run_due_commands()
+        if self._kidnaps:
+            self._run_due_kidnaps()
         self._reassign()
         view = self.view()
         cmd = np.asarray(self.controller.compute(view), float).reshape(self.sim.n, 2)
@@ -665,7 +843,7 @@ class Supervisor:
                 go = ~self.stopped[f.idx] & ~self.teleop[f.idx] & (not self.estopped)
                 fc = f.command(
                     self.t,
-                    self.sim.poses[f.idx],
+                    self.poses_known[f.idx],
                     view.people_xy,
                     self.sim.max_speed[f.idx],
                     self.sim.max_yaw_rate[f.idx],

@@ -204,10 +204,17 @@ def bench_mapping(quick: bool) -> list[dict]:
     odo = OdometryDrift(truth[:1], rng=np.random.default_rng(5))
     odom = np.array([odo.step(p[None])[0] for p in truth])
     rows = []
-    for match in (True, False):
-        from ..sense.mapping import MapperConfig
+    from ..sense.mapping import MapperConfig
 
-        mapper = GridMapper.like(grid, spec=spec, config=MapperConfig(match=match))
+    cases = {
+        # Every scan matched and inserted: the worst case per scan.
+        "match + insert": MapperConfig(insert_min_d_m=0.0),
+        # The default: every scan matched, one inserted per 0.5 m (keyframes).
+        "match, keyframes (default)": MapperConfig(),
+        "insert only (odometry)": MapperConfig(match=False, insert_min_d_m=0.0),
+    }
+    for name, config in cases.items():
+        mapper = GridMapper.like(grid, spec=spec, config=config)
         mapper.update(odom[0], ranges[0], initial_pose=truth[0])
         times = []
         for i in range(1, n):
@@ -217,7 +224,7 @@ def bench_mapping(quick: bool) -> list[dict]:
         err = float(np.hypot(*(mapper.pose[:2] - truth[-1, :2])))
         rows.append(
             {
-                "case": "match + insert" if match else "insert only (odometry)",
+                "case": name,
                 "scans": n - 1,
                 "mean_ms": statistics.fmean(times),
                 "median_ms": statistics.median(times),

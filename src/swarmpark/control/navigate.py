@@ -165,7 +165,8 @@ class Navigator:
 
     def __post_init__(self) -> None:
         self._robots: list[_RobotNav] = []
-        self._costmaps: dict[tuple[float, float], Costmap] = {}
+        # Inflated costmaps per footprint, for the grid stored under "grid".
+        self._costmaps: dict = {}
         self._static_pts: np.ndarray | None = None
         self._static_key: int | None = None
         self._static_tree = None
@@ -183,6 +184,8 @@ class Navigator:
 
     def _costmap(self, view: ControlView, fp: Footprint) -> Costmap:
         key = (round(fp.width_m / 2, 4), round(fp.reach_m, 4))
+        if self._costmaps.get("grid") is not view.grid:  # a new map (detected obstacles)
+            self._costmaps = {"grid": view.grid}
         if key not in self._costmaps:
             self._costmaps[key] = build_costmap(
                 view.grid, key[0], key[1], resolution_m=self.params.plan_resolution_m

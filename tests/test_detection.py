@@ -1,0 +1,50 @@
+"""Obstacle detection in the loop (issue 6, Hing 2018 Sect. 3.5.1): with onboard sensing the
+planner and the avoidance layer use what the scans detected, not the scenario's obstacles."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarmpark.run import run_world
+from swarmpark.scenario import build_world, load_scenario
+from swarmpark.supervisor import Supervisor
+
+ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+CRATE = (6.5, 5.0, 7.5, 6.8)  # x0, y0, x1, y1 of the crate in room-detect.yaml
+PERSON_START = np.array([7.6, 3.4])  # where the person stands until 12 s
+
+
+def _cells_in(grid, x0, y0, x1, y1):
+    r0, c0 = grid.world_to_cell(np.array([[x0, y0]]))[0]
+    r1, c1 = grid.world_to_cell(np.array([[x1, y1]]))[0]
+    return grid.occupied[r0 : r1 + 1, c0 : c1 + 1]
+
+
+def test_with_sensing_the_planner_starts_without_the_scenarios_obstacles():
+    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    assert world.static_obstacles  # the simulator has the crate ...
+    sup = Supervisor(world)
+    assert not _cells_in(sup.known_grid, *CRATE).any()  # ... the planner does not, yet
+    assert len(sup.view().people_xy) == 0  # nor the person
+    sup.tick()
+    assert _cells_in(sup.known_grid, *CRATE).any()  # the first scan shows the crate
+
+
+@pytest.mark.slow
+def test_skids_park_past_a_detected_crate_and_a_person_who_walks_away():
+    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    out = run_world(world)
+    r, sup = out.result, out.supervisor
+    assert r["expect_met"], r["expect_failures"]
+    assert r["collisions"] == []
+    for rid, s in r["robots"].items():
+        assert s["final_position_error_m"] <= 0.10, rid
+        assert s["final_heading_error_deg"] <= 5.0, rid
+    assert r["localization"]["mean_error_m"] < 0.05
+    # The crate is still in the planner's map (seen all along); the person's spot has cleared.
+    assert _cells_in(sup.known_grid, *CRATE).any()
+    t = sup.t
+    for i in range(sup.sim.n):
+        near = sup.costmap.obstacles(i, t, center=PERSON_START, radius_m=0.5)
+        assert len(near.cells) == 0
