@@ -27,6 +27,7 @@ __all__ = [
     "convex_overlap",
     "convex_gap",
     "convex_distance",
+    "point_segment_distance",
     "rect_disc_gap",
     "triangulate",
     "pad_polygons",
@@ -186,7 +187,7 @@ def convex_overlap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return overlap.min(-1)
 
 
-def _point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
+def point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
     """Distances between points ``(..., 2)`` and segments ``s0 -> s1`` (broadcast)."""
     dx, dy = s1[..., 0] - s0[..., 0], s1[..., 1] - s0[..., 1]
     px, py = p[..., 0] - s0[..., 0], p[..., 1] - s0[..., 1]
@@ -199,8 +200,8 @@ def convex_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance ``(M,)`` between convex polygon pairs known not to overlap (0 if touching)."""
     a_next, b_next = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
     # Each vertex of one polygon against each edge of the other: (M, K, L).
-    d_ab = _point_segment_distance(a[:, :, None, :], b[:, None, :, :], b_next[:, None, :, :])
-    d_ba = _point_segment_distance(b[:, :, None, :], a[:, None, :, :], a_next[:, None, :, :])
+    d_ab = point_segment_distance(a[:, :, None, :], b[:, None, :, :], b_next[:, None, :, :])
+    d_ba = point_segment_distance(b[:, :, None, :], a[:, None, :, :], a_next[:, None, :, :])
     return np.minimum(d_ab.min(axis=(1, 2)), d_ba.min(axis=(1, 2)))
 
 

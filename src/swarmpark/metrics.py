@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .assign import AssignmentError, bottleneck_assignment
-from .geometry import wrap_angle
+from .geometry import point_segment_distance, wrap_angle
 from .gridmap import OccupancyGrid
 from .plan import build_costmap, path_length_matrix
 
@@ -115,13 +115,8 @@ class MetricsRecorder:
     ) -> None:
         """Record the state after one step (``paused``: stopped or e-stopped robots)."""
         self.path_length += np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
-        a, b = self._leg[:, 0], self._leg[:, 1]
-        ab = b - a
-        f = np.einsum("ij,ij->i", poses[:, :2] - a, ab) / np.maximum(
-            np.einsum("ij,ij->i", ab, ab), 1e-12
-        )
-        foot = a + np.clip(f, 0.0, 1.0)[:, None] * ab
-        self._lateral = np.maximum(self._lateral, np.linalg.norm(poses[:, :2] - foot, axis=1))
+        off_leg = point_segment_distance(poses[:, :2], self._leg[:, 0], self._leg[:, 1])
+        self._lateral = np.maximum(self._lateral, off_leg)
         self._prev = poses.copy()
         for c in step.new_contacts:
             self.collisions.append(c.as_dict())

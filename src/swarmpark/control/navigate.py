@@ -129,6 +129,26 @@ class NavParams:
     outline_step_m: float = 0.1
 
 
+def _station(path: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, int, float]:
+    """Where ``xy`` projects onto a polyline: the cumulative arc lengths of its vertices,
+    the segment it projects onto, and the arc length there."""
+    seg = np.diff(path, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    rel = xy - path[:-1]
+    t = np.clip(np.einsum("ij,ij->i", rel, seg) / np.maximum(seg_len**2, 1e-12), 0, 1)
+    proj = path[:-1] + t[:, None] * seg
+    j = int(np.argmin(np.linalg.norm(proj - xy, axis=1)))
+    return cum, j, float(cum[j] + t[j] * seg_len[j])
+
+
+def _point_at(path: np.ndarray, cum: np.ndarray, s: float) -> tuple[np.ndarray, int]:
+    """The point at arc length ``s`` (within ``[0, cum[-1]]``) of a polyline and its segment."""
+    m = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(path) - 2))
+    f = (s - cum[m]) / max(cum[m + 1] - cum[m], 1e-12)
+    return path[m] + f * (path[m + 1] - path[m]), m
+
+
 @dataclass
 class _RobotNav:
     path: np.ndarray | None = None
@@ -165,8 +185,9 @@ class Navigator:
 
     def __post_init__(self) -> None:
         self._robots: list[_RobotNav] = []
-        # Inflated costmaps per footprint, for the grid stored under "grid".
-        self._costmaps: dict = {}
+        # Inflated costmaps per footprint, for the grid in _costmap_grid.
+        self._costmaps: dict[tuple[float, float], Costmap] = {}
+        self._costmap_grid = None
         self._static_pts: np.ndarray | None = None
         self._static_key: int | None = None
         self._static_tree = None
@@ -184,8 +205,8 @@ class Navigator:
 
     def _costmap(self, view: ControlView, fp: Footprint) -> Costmap:
         key = (round(fp.width_m / 2, 4), round(fp.reach_m, 4))
-        if self._costmaps.get("grid") is not view.grid:  # a new map (detected obstacles)
-            self._costmaps = {"grid": view.grid}
+        if self._costmap_grid is not view.grid:  # a new map (detected obstacles)
+            self._costmaps, self._costmap_grid = {}, view.grid
         if key not in self._costmaps:
             self._costmaps[key] = build_costmap(
                 view.grid, key[0], key[1], resolution_m=self.params.plan_resolution_m
@@ -316,24 +337,13 @@ class Navigator:
             path = nav.path
             if path is None or len(path) < 2:
                 continue
-            seg = np.diff(path, axis=0)
-            seg_len = np.linalg.norm(seg, axis=1)
-            cum = np.concatenate([[0.0], np.cumsum(seg_len)])
-            # Project the pivot onto the path.
-            rel = view.poses[i, :2] - path[:-1]
-            t = np.clip(np.einsum("ij,ij->i", rel, seg) / np.maximum(seg_len**2, 1e-12), 0, 1)
-            proj = path[:-1] + t[:, None] * seg
-            j = int(np.argmin(np.linalg.norm(proj - view.poses[i, :2], axis=1)))
-            s_here = cum[j] + t[j] * seg_len[j]
-            remaining = cum[-1] - s_here
-            if remaining <= p.approach_m:
+            cum, _, s_here = _station(path, view.poses[i, :2])
+            if cum[-1] - s_here <= p.approach_m:
                 continue
             final[k] = False
-            s_t = min(s_here + lookahead_m, cum[-1])
-            m = int(np.clip(np.searchsorted(cum, s_t, side="right") - 1, 0, len(seg) - 1))
-            f = (s_t - cum[m]) / max(seg_len[m], 1e-12)
-            pt = path[m] + f * seg[m]
-            heading = np.arctan2(seg[m, 1], seg[m, 0]) + (np.pi if nav.reverse else 0.0)
+            pt, m = _point_at(path, cum, min(s_here + lookahead_m, cum[-1]))
+            seg = path[m + 1] - path[m]
+            heading = np.arctan2(seg[1], seg[0]) + (np.pi if nav.reverse else 0.0)
             targets[k] = [pt[0], pt[1], wrap_angle(heading)]
         return targets, final
 
@@ -754,17 +764,10 @@ class Navigator:
         back = pose[:2] - head * (fp.length_m - fp.pivot if self._robots[i].reverse else fp.pivot)
         if path is None or len(path) < 2:
             return np.vstack([back, pose[:2]])
-        seg = np.diff(path, axis=0)
-        seg_len = np.linalg.norm(seg, axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(seg_len)])
-        rel = pose[:2] - path[:-1]
-        t = np.clip(np.einsum("ij,ij->i", rel, seg) / np.maximum(seg_len**2, 1e-12), 0, 1)
-        proj = path[:-1] + t[:, None] * seg
-        j = int(np.argmin(np.linalg.norm(proj - pose[:2], axis=1)))
-        s_end = cum[j] + t[j] * seg_len[j] + length
+        cum, j, s_here = _station(path, pose[:2])
+        s_end = min(s_here + length, cum[-1])
         inner = path[j + 1 :][cum[j + 1 :] < s_end]
-        m = int(np.clip(np.searchsorted(cum, s_end, side="right") - 1, 0, len(seg) - 1))
-        tip = path[m] + min((s_end - cum[m]) / max(seg_len[m], 1e-12), 1.0) * seg[m]
+        tip, _ = _point_at(path, cum, s_end)
         return np.vstack([back, pose[:2], inner, tip])
 
     def _make_room(self, view: ControlView, settled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -810,7 +813,8 @@ class Navigator:
         feet = shapely.polygons(footprint_corners(view.poses[cand], self._plain[cand]))
         inside = shapely.intersects(way, feet)
         self._static_points(view)
-        steps = np.arange(1, 41) * 0.05  # candidate shifts, m
+        steps = np.arange(1, 41) * 0.05
+        shifts = np.concatenate([steps, -steps])  # candidate moves along the axis, m
         # Skids that stood aside wait there while their own spot is still in the way.
         goal_feet = shapely.polygons(footprint_corners(view.goals[cand], self._plain[cand]))
         spot_taken = shapely.intersects(way, goal_feet)
@@ -823,7 +827,6 @@ class Navigator:
                     nav.room_side = 0
                 continue
             head = np.array([np.cos(view.poses[i, 2]), np.sin(view.poses[i, 2])])
-            shifts = np.concatenate([steps, -steps])
             poses = np.repeat(view.poses[i][None], len(shifts), axis=0)
             poses[:, :2] += shifts[:, None] * head
             moved = shapely.polygons(footprint_corners(poses, self._plain[[i] * len(shifts)]))
