@@ -10,8 +10,9 @@ from swarmpark.scenario import build_world, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 #: Run with more checks elsewhere: room-park-built by tests/test_map_command.py on a map built
-#: afresh (here it would use the committed one), room-detect by tests/test_detection.py.
-RUN_ELSEWHERE = {"room-park-built.yaml", "room-detect.yaml"}
+#: afresh (here it would use the committed one), room-detect by tests/test_detection.py,
+#: circle-20-antipodal by tests/test_rvo_scenarios.py.
+RUN_ELSEWHERE = {"room-park-built.yaml", "room-detect.yaml", "circle-20-antipodal.yaml"}
 SCENARIOS = sorted(p.name for p in ROOT.glob("*.yaml") if p.name not in RUN_ELSEWHERE)
 
 

@@ -29,6 +29,7 @@ __all__ = [
     "convex_distance",
     "point_segment_distance",
     "rect_disc_gap",
+    "integrate_unicycle",
     "triangulate",
     "pad_polygons",
     "as_simple_polygon",
@@ -279,3 +280,19 @@ def pad_polygons(polys: Sequence[np.ndarray], k: int = 4) -> np.ndarray:
         out[i, : len(p)] = p
         out[i, len(p) :] = p[-1]
     return out
+
+
+#: Yaw rates below this are integrated as straight lines.
+_STRAIGHT_EPS = 1e-9
+
+
+def integrate_unicycle(poses: np.ndarray, v: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
+    """Exact arc integration of pivot poses ``(N, 3)`` under constant ``v, w`` for ``dt``."""
+    x, y, th = poses[:, 0], poses[:, 1], poses[:, 2]
+    dth = w * dt
+    straight = np.abs(w) < _STRAIGHT_EPS
+    safe_w = np.where(straight, 1.0, w)
+    dx = np.where(straight, v * dt * np.cos(th), v / safe_w * (np.sin(th + dth) - np.sin(th)))
+    dy = np.where(straight, v * dt * np.sin(th), -v / safe_w * (np.cos(th + dth) - np.cos(th)))
+    new_th = (th + dth + np.pi) % (2 * np.pi) - np.pi
+    return np.column_stack([x + dx, y + dy, new_th])

@@ -24,19 +24,18 @@ from .geometry import (
     convex_distance,
     convex_overlap,
     footprint_corners,
+    integrate_unicycle,
     pivot_to_center,
     rect_disc_gap,
 )
 from .scenario import World
 
-__all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M"]
+__all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M", "integrate_unicycle"]
 
 #: Clearances beyond this distance are not tracked (reported as this value).
 CLEARANCE_RANGE_M = 2.0
 #: A contact episode ends once the two parties are this far apart again.
 CONTACT_RELEASE_M = 0.10
-#: Yaw rates below this are integrated as straight lines.
-_STRAIGHT_EPS = 1e-9
 
 
 @dataclass(frozen=True)
@@ -58,18 +57,6 @@ class StepResult:
     blocked: np.ndarray | None = None  # (N,) bool, robots whose motion was rejected
     clearance_robot_m: np.ndarray | None = None  # (N,) nearest other robot
     clearance_static_m: np.ndarray | None = None  # (N,) nearest wall/obstacle
-
-
-def integrate_unicycle(poses: np.ndarray, v: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
-    """Exact arc integration of pivot poses ``(N, 3)`` under constant ``v, w`` for ``dt``."""
-    x, y, th = poses[:, 0], poses[:, 1], poses[:, 2]
-    dth = w * dt
-    straight = np.abs(w) < _STRAIGHT_EPS
-    safe_w = np.where(straight, 1.0, w)
-    dx = np.where(straight, v * dt * np.cos(th), v / safe_w * (np.sin(th + dth) - np.sin(th)))
-    dy = np.where(straight, v * dt * np.sin(th), -v / safe_w * (np.cos(th + dth) - np.cos(th)))
-    new_th = (th + dth + np.pi) % (2 * np.pi) - np.pi
-    return np.column_stack([x + dx, y + dy, new_th])
 
 
 class Simulator:

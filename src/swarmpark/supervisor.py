@@ -808,6 +808,7 @@ class Supervisor:
             max_speed=sim.max_speed,
             max_yaw_rate=sim.max_yaw_rate,
             max_accel=sim.max_accel,
+            max_yaw_accel=sim.max_yaw_accel,
             grid=self.known_grid,
             people_xy=ppos,
             people_vel=pvel,

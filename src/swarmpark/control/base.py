@@ -40,6 +40,7 @@ class ControlView:
     hold: np.ndarray | None = None  # (N,) bool: wait outside hold_zones[i] (fill order)
     hold_zones: tuple = ()  # per robot: shapely Polygon (its parking boundary) or None
     stopped: np.ndarray | None = None  # (N,) bool: stopped, e-stopped or teleop (immobile)
+    max_yaw_accel: np.ndarray | None = None  # (N,) rad/s^2; None: turns change at once
 
 
 class Controller(Protocol):

@@ -25,7 +25,9 @@ from ..geometry import (
     Footprint,
     convex_overlap,
     footprint_corners,
+    integrate_unicycle,
     rect_disc_gap,
+    rotation,
     transform_points,
     wrap_angle,
 )
@@ -74,10 +76,24 @@ class NavParams:
     #: With RVO a skid on its path aims its effective centre this far ahead on the path (a
     #: long lookahead, so that a sidestep does not turn into a pull back onto the path).
     rvo_lookahead_m: float = 3.0
-    #: Deadlocks with RVO: no progress of this much (m) for this long (s) bumps the priority.
+    #: Deadlocks with RVO: no progress of this much (m) for this long (s) bumps the priority;
+    #: each further ``rvo_stuck_s`` without progress, the skid side-steps to the right of its
+    #: path for ``rvo_sidestep_s``; held still by the collision monitor for ``stall_s``, it
+    #: backs out straight along its axis for ``backup_m``.
     rvo_progress_m: float = 0.1
     rvo_stuck_s: float = 3.0
     rvo_bump: float = 2.0
+    rvo_sidestep_s: float = 2.0
+    #: Keep right: a skid on its path with another skid on the move coming the other way
+    #: within ``rvo_keep_right_range_m`` turns its preferred velocity this much clockwise, so
+    #: that crossings resolve as a roundabout instead of stalling in symmetric jams (RVO2's
+    #: examples break the symmetry with noise).
+    rvo_keep_right_rad: float = 1.0
+    rvo_keep_right_range_m: float = 4.0
+    #: ... fully with static solids at least ``rvo_keep_right_open_m`` away, fading out to
+    #: none at ``rvo_keep_right_tight_m`` (in a door both keeping right wedge on the jambs).
+    rvo_keep_right_open_m: float = 2.5
+    rvo_keep_right_tight_m: float = 1.0
     #: Extra margin (m) around skids on the move in the velocity obstacles.
     rvo_margin_m: float = 0.1
     #: Horizon (s) of the velocity obstacles between skids: avoid this early.
@@ -167,6 +183,10 @@ class _RobotNav:
     best_remaining: float = np.inf
     best_t: float = 0.0
     recovery: dict | None = None
+    sidestep_until: float = -np.inf
+    #: RVO back-out: metres left and the direction (+1 forwards, -1 backwards) along the axis.
+    backout_left: float = 0.0
+    backout_dir: float = 0.0
     runup: bool = False
     runup_from: float = 0.0
     backup_left: float = 0.0
@@ -418,7 +438,7 @@ class Navigator:
             aims, _ = self._targets(view, idx[cruising], p.rvo_lookahead_m)
             full = self._orca(view, full, idx[cruising], aims)
             moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
-            cmd[moving] = self._monitor(view, moving, full[moving])
+            cmd[moving] = self._monitor(view, moving, full[moving], joint=True)
             self._hold_outside(view, idx, cmd)
             self._track_stalls(view, idx, cmd)
             return cmd
@@ -671,9 +691,17 @@ class Navigator:
         return out_f, out_r
 
     def _monitor(
-        self, view: ControlView, idx: np.ndarray, raw: np.ndarray, *, robots: bool = True
+        self,
+        view: ControlView,
+        idx: np.ndarray,
+        raw: np.ndarray,
+        *,
+        robots: bool = True,
+        joint: bool = False,
     ) -> np.ndarray:
-        """Scale each command down until its short forward simulation is collision-free."""
+        """Scale each command down until its short forward simulation is collision-free
+        (others where they are now); with ``joint``, also stop pairs whose commands together
+        would bring them into contact (:meth:`_joint_check`)."""
         p = self.params
         n_act = len(idx)
         scales = np.asarray(p.monitor_scales)
@@ -687,24 +715,13 @@ class Navigator:
         # A skid already inside its margin of something is judged by its plain footprint, or it
         # could never move away again.
         body = np.where(self._within_margin(view, idx, body)[:, None, None], plain, body)
-        # Poses for every (robot, scale, time): constant (v, omega) arcs from the current pose.
-        v = raw[:, 0][:, None, None] * scales[None, :, None]
-        w = np.broadcast_to(raw[:, 1][:, None, None], v.shape)
-        t = times[None, None, :]
-        th0 = view.poses[idx, 2][:, None, None]
-        straight = np.abs(w) < 1e-9
-        ws = np.where(straight, 1.0, w)
-        dx = np.where(straight, v * t * np.cos(th0), v / ws * (np.sin(th0 + w * t) - np.sin(th0)))
-        dy = np.where(straight, v * t * np.sin(th0), -v / ws * (np.cos(th0 + w * t) - np.cos(th0)))
+        # Poses for every (robot, scale, time): from the current velocity towards the command
+        # within the acceleration limits (a skid turning fast cannot stop turning at once),
+        # integrated in control steps.
         S, T = len(scales), len(times)
-        pose = np.stack(
-            [
-                view.poses[idx, 0][:, None, None] + dx,
-                view.poses[idx, 1][:, None, None] + dy,
-                np.broadcast_to(th0 + w * t, dx.shape),
-            ],
-            -1,
-        ).reshape(-1, 3)
+        v_cmd = (raw[:, 0][:, None] * scales[None, :]).ravel()
+        w_cmd = np.repeat(raw[:, 1], S)
+        pose = self._rollout(view, np.repeat(idx, S), v_cmd, w_cmd, times).reshape(-1, 3)
         owner = np.repeat(np.arange(n_act), S * T)
         corners = footprint_corners(pose, np.repeat(body, S * T, axis=0))
         bad = np.zeros(len(pose), dtype=bool)
@@ -753,7 +770,61 @@ class Navigator:
             nav = self._robots[i]
             nav.blockers = blockers[k] if slowed[k] else set()
             nav.blocked_s = nav.blocked_s + view.dt if nav.blockers else 0.0
+        if joint and robots:
+            self._joint_check(view, idx, out, body, times)
         return out
+
+    def _rollout(
+        self, view: ControlView, rows: np.ndarray, v_cmd: np.ndarray, w_cmd, times: np.ndarray
+    ) -> np.ndarray:
+        """Poses ``(len(rows), T, 3)`` of skids ``rows`` at ``times`` under the commands held,
+        from their current velocities within the acceleration limits (a skid turning fast
+        cannot stop turning at once), integrated in control steps."""
+        n_sub = max(1, int(round(times[-1] / view.dt)))
+        sub_dt = times[-1] / n_sub
+        record = np.clip(np.round(times / sub_dt), 1, n_sub).astype(int)
+        v, w = view.vel[rows, 0], view.vel[rows, 1]
+        dv = view.max_accel[rows] * sub_dt
+        dw = np.inf if view.max_yaw_accel is None else view.max_yaw_accel[rows] * sub_dt
+        now = view.poses[rows]
+        pose = np.empty((len(rows), len(times), 3))
+        for step in range(1, n_sub + 1):
+            v = v + np.clip(v_cmd - v, -dv, dv)
+            w = w + np.clip(w_cmd - w, -dw, dw)
+            now = integrate_unicycle(now, v, w, sub_dt)
+            pose[:, record == step] = now[:, None]
+        return pose
+
+    def _joint_check(
+        self, view: ControlView, idx: np.ndarray, out: np.ndarray, body: np.ndarray, times
+    ) -> None:
+        """Stop the pairs of skids whose commands, held together, bring them into contact
+        within the monitor horizon (in place on ``out``).
+
+        Each skid's own check treats the others as standing still; two skids turning in
+        place next to each other, each safe alone, can still swing their corners together.
+        ORCA should prevent that, but its guarantee is for one step and holonomic centres.
+        The stopped skids' braking is rolled out again, until no new pair is found.
+        """
+        T = len(times)
+        reach = max(f.circumradius_m for f in view.footprints) * 2.0
+        speed = np.abs(view.vel[idx, 0]).max(initial=0.0) + view.max_speed[idx].max()
+        pairs = cKDTree(view.poses[idx, :2]).query_pairs(
+            reach + 2.0 * speed * times[-1], output_type="ndarray"
+        )
+        while len(pairs):
+            pose = self._rollout(view, idx, out[:, 0], out[:, 1], times)
+            corners = footprint_corners(pose.reshape(-1, 3), np.repeat(body, T, axis=0))
+            corners = corners.reshape(len(idx), T, 4, 2)
+            a = np.repeat(pairs[:, 0], T)
+            b = np.repeat(pairs[:, 1], T)
+            tk = np.tile(np.arange(T), len(pairs))
+            hit = convex_overlap(corners[a, tk], corners[b, tk]) > TOUCH_TOLERANCE_M
+            bad = np.unique(pairs[hit.reshape(len(pairs), T).any(axis=1)])
+            bad = bad[np.any(out[bad] != 0.0, axis=1)]
+            if not len(bad):
+                return
+            out[bad] = 0.0
 
     def _path_ahead(self, view: ControlView, i: int, length: float) -> np.ndarray | None:
         """Skid ``i``'s path from its rear to ``length`` ahead of its pivot (a polyline)."""
@@ -852,15 +923,25 @@ class Navigator:
             )
         return speed, aside
 
-    def _deadlock_bumps(self, view: ControlView, settled: np.ndarray) -> np.ndarray:
-        """Detect and resolve deadlocks between skids on the move (RVO).
+    def _deadlock_recovery(self, view: ControlView, settled: np.ndarray) -> np.ndarray:
+        """Detect and resolve deadlocks between skids on the move (RVO); returns the
+        priority bumps.
 
         A skid with an unreached goal that has not come ``rvo_progress_m`` closer for
         ``rvo_stuck_s`` is deadlocked (symmetric jams, where every ORCA solution is to wait).
-        It gets a priority bump of ``rvo_bump`` plus up to one more the nearer it is to its
-        goal, so the jam is ordered (nearest first, whatever the robots' order) and the others
-        make way; the bump ends when it makes progress again. Each episode is recorded in
-        :attr:`recoveries` with the time it took to clear.
+        The recovery escalates while it stays stuck:
+
+        1. a priority bump of ``rvo_bump`` plus up to one more the nearer it is to its goal,
+           so the jam is ordered (nearest first, whatever the robots' order) and the others
+           make way;
+        2. every further ``rvo_stuck_s``, a side step: for ``rvo_sidestep_s`` its preferred
+           velocity points to the right of its path (:meth:`_orca`);
+        3. when the collision monitor has held it still for ``stall_s`` (ORCA's holonomic
+           centre asks for a turn its corners have no room for), it backs out straight along
+           its axis, away from the skid nearest it, for ``backup_m``.
+
+        The recovery ends when the skid makes progress again. Each episode is recorded in
+        :attr:`recoveries` with the actions taken and the time it took to clear.
         """
         p = self.params
         bump = np.zeros(len(view.poses))
@@ -871,6 +952,7 @@ class Navigator:
             nav = self._robots[i]
             if view.goal_changed[i] or not view.active[i] or settled[i]:
                 nav.best_remaining, nav.best_t = remaining[i], view.t
+                nav.sidestep_until, nav.backout_left = -np.inf, 0.0
                 if nav.recovery is not None and (not view.active[i] or settled[i]):
                     self._close_recovery(nav, view.t)
                 continue
@@ -878,21 +960,48 @@ class Navigator:
                 nav.best_remaining, nav.best_t = remaining[i], view.t
                 if nav.recovery is not None:
                     self._close_recovery(nav, view.t)
-            if view.t - nav.best_t >= p.rvo_stuck_s:
-                if nav.recovery is None:
-                    nav.recovery = {
-                        "robot": i,
-                        "start_s": round(view.t, 3),
-                        "action": "priority bump",
-                    }
-                    self.recoveries.append(nav.recovery)
-                bump[i] = p.rvo_bump * (1.0 + 1.0 / (1.0 + remaining[i]))
+            stuck_for = view.t - nav.best_t
+            if stuck_for < p.rvo_stuck_s:
+                continue
+            if nav.recovery is None:
+                nav.recovery = {
+                    "robot": i,
+                    "start_s": round(view.t, 3),
+                    "actions": ["priority bump"],
+                }
+                self.recoveries.append(nav.recovery)
+            bump[i] = p.rvo_bump * (1.0 + 1.0 / (1.0 + remaining[i]))
+            acts = nav.recovery["actions"]
+            if nav.backout_left <= 0 and nav.stalled_s >= p.stall_s:
+                nav.backout_left = p.backup_m
+                nav.backout_dir = self._away_from_nearest(view, i)
+                nav.stalled_s = 0.0
+                acts.append("back out")
+            elif (
+                nav.backout_left <= 0
+                and p.rvo_sidestep_s > 0
+                and view.t >= nav.sidestep_until + p.rvo_stuck_s
+                and stuck_for >= 2 * p.rvo_stuck_s
+            ):
+                nav.sidestep_until = view.t + p.rvo_sidestep_s
+                acts.append("side step")
         return bump
+
+    def _away_from_nearest(self, view: ControlView, i: int) -> float:
+        """+1 or -1: the direction along skid ``i``'s axis away from the nearest other skid."""
+        others = np.delete(np.arange(len(view.poses)), i)
+        if not len(others):
+            return -1.0
+        d = view.poses[others, :2] - view.poses[i, :2]
+        j = np.argmin(np.linalg.norm(d, axis=1))
+        h = np.array([np.cos(view.poses[i, 2]), np.sin(view.poses[i, 2])])
+        return -1.0 if float(d[j] @ h) >= 0 else 1.0
 
     @staticmethod
     def _close_recovery(nav: _RobotNav, t: float) -> None:
         nav.recovery["cleared_after_s"] = round(t - nav.recovery["start_s"], 3)
         nav.recovery = None
+        nav.sidestep_until, nav.backout_left = -np.inf, 0.0
 
     def _corners_now(self, view: ControlView, i: int) -> np.ndarray:
         return footprint_corners(view.poses[i][None], self._plain[i][None])[0]
@@ -909,7 +1018,9 @@ class Navigator:
         (``settled``) take ``parked_priority`` and move only along their own axis: they make
         room for skids on the move and people (:meth:`_make_room`, at ``room_priority``),
         yield to everyone, and dock back afterwards. Stopped skids and skids without orders
-        are immobile: everyone else takes the full share against them.
+        are immobile: everyone else takes the full share against them. Deadlocked skids get
+        the recoveries of :meth:`_deadlock_recovery`: a skid side-stepping prefers the right
+        of its path, one backing out moves only along its axis, like a settled skid.
         """
         from .rvo import (
             OrcaParams,
@@ -958,15 +1069,23 @@ class Navigator:
         # straight and sit close together, so they keep the bound alone.
         margin = err + np.where(settled | immobile, 0.0, p.rvo_margin_m)
         centres, shapes = skid_shapes(view.poses, self._plain, offset_m=d, margin_m=margin)
+        bump = self._deadlock_recovery(view, settled)
         if len(cruising):
             to_aim = aims[:, :2] - centres[cruising]
             dist = np.linalg.norm(to_aim, axis=1, keepdims=True)
             u_pref[cruising] = to_aim / np.maximum(dist, 1e-9) * u_lim[cruising, None]
-        prio = np.where(
-            settled, p.parked_priority, view.priority + self._deadlock_bumps(view, settled)
-        )
+            turn = self._keep_right(centres, u_pref, cruising, ~settled & ~immobile & view.active)
+            side = np.array([view.t < self._robots[i].sidestep_until for i in cruising], bool)
+            turn[side] = np.pi / 2
+            u_pref[cruising] = np.einsum("nij,nj->ni", rotation(-turn), u_pref[cruising])
+        # Backing out (a recovery): straight along the axis at half speed.
+        backing = np.array([r.backout_left > 0 for r in self._robots], dtype=bool) & ~immobile
+        for i in np.flatnonzero(backing):
+            u_pref[i] = self._robots[i].backout_dir * 0.5 * view.max_speed[i] * h[i]
+        prio = np.where(settled, p.parked_priority, view.priority + bump)
         prio = np.where(room != 0, p.room_priority, prio)
-        axes = np.where(settled[:, None], h, np.nan)
+        on_axis = settled | backing
+        axes = np.where(on_axis[:, None], h, np.nan)
         res = orca_step(
             centres,
             u_now,
@@ -982,7 +1101,6 @@ class Navigator:
             people_radii=view.people_radius,
             obstacles=self._orca_obstacles,
             axes=axes,
-            pref_opt=~settled,
         )
         v, w = holonomic_to_unicycle(
             view.poses,
@@ -993,15 +1111,49 @@ class Navigator:
         )
         out = np.column_stack([v, w])
         along = np.clip(np.einsum("ij,ij->i", res.velocities, h), -view.max_speed, view.max_speed)
-        out[settled] = np.column_stack([along, np.zeros_like(along)])[settled]
+        out[on_axis] = np.column_stack([along, np.zeros_like(along)])[on_axis]
         for i in np.flatnonzero(settled & (np.abs(along) > 1e-3)):
             self._robots[i].docked = False  # pushed aside: dock again precisely afterwards
+        for i in np.flatnonzero(backing):
+            nav = self._robots[i]
+            nav.backout_left -= abs(view.vel[i, 0]) * view.dt
+            if nav.stalled_s >= p.stall_s:  # backing out is blocked too
+                nav.backout_left = 0.0
         # Pure turns in place (u = 0 at the centre would drop them) pass through when ORCA
         # left the preferred velocity unchanged.
-        same = (np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9) & ~settled
+        same = (np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9) & ~on_axis
         out[same] = raw[same]
         out[immobile] = 0.0
         return out
+
+    def _keep_right(
+        self, centres: np.ndarray, u_pref: np.ndarray, cruising: np.ndarray, movers: np.ndarray
+    ) -> np.ndarray:
+        """Clockwise turn (rad) of each cruising skid's preferred velocity: ``rvo_keep_right_rad``
+        where another skid on the move within ``rvo_keep_right_range_m`` ahead comes the other
+        way (their preferred velocities more than 90 degrees apart), else 0."""
+        p = self.params
+        turn = np.zeros(len(cruising))
+        if p.rvo_keep_right_rad == 0 or movers.sum() < 2:
+            return turn
+        others = np.flatnonzero(movers)
+        near = cKDTree(centres[others]).query_ball_point(
+            centres[cruising], p.rvo_keep_right_range_m
+        )
+        for k, (i, cand) in enumerate(zip(cruising, near, strict=True)):
+            j = others[cand]
+            j = j[j != i]
+            ahead = (centres[j] - centres[i]) @ u_pref[i] > 0
+            oncoming = u_pref[j] @ u_pref[i] < 0
+            if np.any(ahead & oncoming):
+                turn[k] = p.rvo_keep_right_rad
+        if self._static_kd is not None and turn.any():
+            clear, _ = self._static_kd.query(centres[cruising], distance_upper_bound=100.0)
+            fade = (clear - p.rvo_keep_right_tight_m) / (
+                p.rvo_keep_right_open_m - p.rvo_keep_right_tight_m
+            )
+            turn *= np.clip(fade, 0.0, 1.0)
+        return turn
 
     def _within_margin(self, view: ControlView, idx: np.ndarray, grown: np.ndarray) -> np.ndarray:
         """Skids whose grown footprint overlaps a static solid or another skid right now."""

@@ -1112,7 +1112,6 @@ def orca_step(
     people_radii=None,
     obstacles: StaticObstacles | None = None,
     axes: np.ndarray | None = None,
-    pref_opt: np.ndarray | None = None,
 ) -> OrcaResult:
     """New velocities for all robots from one snapshot (no dependence on robot order).
 
@@ -1149,15 +1148,6 @@ def orca_step(
         its corners into its neighbours). Two opposite hard half-planes hold the velocity on
         the line; the other robots still count on the robot's full share, so where the line
         cannot provide it, the safety filter keeps the step collision-free.
-    pref_opt
-        ``(N,)`` bool: between two such robots the velocity obstacle is taken at their
-        preferred velocities rather than their current ones (ORCA's ``v_opt = v_pref``, van
-        den Berg et al. 2011 Sect. 5.2; both robots of a pair use the same choice, so the
-        shares still add up). Two skids meeting head-on then take the legs of the obstacle
-        and pass, instead of the flat cut-off face, along which the one with the larger
-        share is pushed backwards ahead of the other. Meant for robots on the move, where
-        the constraints stay few; dense groups keep ``v_opt`` = current velocity.
-
     Returns
     -------
     OrcaResult
@@ -1181,10 +1171,6 @@ def orca_step(
     if still.shape != (n,):
         raise ValueError(f"immobile: expected shape ({n},), got {still.shape}")
     vel = np.where(still[:, None], 0.0, vel)
-    use_pref = np.zeros(n, bool) if pref_opt is None else np.asarray(pref_opt, dtype=bool)
-    if use_pref.shape != (n,):
-        raise ValueError(f"pref_opt: expected shape ({n},), got {use_pref.shape}")
-    use_pref = use_pref & ~still
     inv_dt = 1.0 / dt_s
     reach = np.linalg.norm(shp, axis=-1).max(axis=1) if n else np.zeros(0)
     speed = np.maximum(vmax, np.linalg.norm(vel, axis=-1))
@@ -1331,8 +1317,7 @@ def orca_step(
             if rows.size:
                 used, pair_of = np.unique(inverse[:n_orca], return_inverse=True)
                 a, b = lo[used], hi[used]
-                both = use_pref[a] & use_pref[b]
-                rel_opt = np.where(both[:, None], pref[a] - pref[b], vel[a] - vel[b])
+                rel_opt = vel[a] - vel[b]
                 ux, uy, nx, ny, inside = _in_chunks(
                     _vo_projection,
                     5,
@@ -1355,7 +1340,7 @@ def orca_step(
                 # Against a robot that will not move, all of it is ours, either way.
                 share = np.where(still[nb], 1.0, share)
                 pt, dr = _lines(
-                    np.where(both[pair_of, None], pref[rows], vel[rows]),
+                    vel[rows],
                     share,
                     sign * ux[pair_of],
                     sign * uy[pair_of],
