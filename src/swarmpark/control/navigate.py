@@ -78,8 +78,8 @@ class NavParams:
     rvo_lookahead_m: float = 3.0
     #: Deadlocks with RVO: no progress of this much (m) for this long (s) bumps the priority;
     #: each further ``rvo_stuck_s`` without progress, the skid side-steps to the right of its
-    #: path for ``rvo_sidestep_s``; held still by the collision monitor for ``stall_s``, it
-    #: backs out straight along its axis for ``backup_m``.
+    #: path for ``rvo_sidestep_s``; held still (by ORCA or the collision monitor) for
+    #: ``stall_s``, it backs out straight along its axis for ``backup_m``.
     rvo_progress_m: float = 0.1
     rvo_stuck_s: float = 3.0
     rvo_bump: float = 2.0
@@ -936,9 +936,10 @@ class Navigator:
            make way;
         2. every further ``rvo_stuck_s``, a side step: for ``rvo_sidestep_s`` its preferred
            velocity points to the right of its path (:meth:`_orca`);
-        3. when the collision monitor has held it still for ``stall_s`` (ORCA's holonomic
-           centre asks for a turn its corners have no room for), it backs out straight along
-           its axis, away from the skid nearest it, for ``backup_m``.
+        3. when it has been held still for ``stall_s`` (typically by the collision monitor,
+           when ORCA's holonomic centre asks for a turn its corners have no room for), it
+           backs out straight along its axis, away from the skid nearest it, for
+           ``backup_m``.
 
         The recovery ends when the skid makes progress again. Each episode is recorded in
         :attr:`recoveries` with the actions taken and the time it took to clear.
@@ -1074,7 +1075,8 @@ class Navigator:
             to_aim = aims[:, :2] - centres[cruising]
             dist = np.linalg.norm(to_aim, axis=1, keepdims=True)
             u_pref[cruising] = to_aim / np.maximum(dist, 1e-9) * u_lim[cruising, None]
-            turn = self._keep_right(centres, u_pref, cruising, ~settled & ~immobile & view.active)
+            movers = ~settled & ~immobile & view.active
+            turn = self._keep_right(view, centres, u_pref, cruising, movers)
             side = np.array([view.t < self._robots[i].sidestep_until for i in cruising], bool)
             turn[side] = np.pi / 2
             u_pref[cruising] = np.einsum("nij,nj->ni", rotation(-turn), u_pref[cruising])
@@ -1127,7 +1129,12 @@ class Navigator:
         return out
 
     def _keep_right(
-        self, centres: np.ndarray, u_pref: np.ndarray, cruising: np.ndarray, movers: np.ndarray
+        self,
+        view: ControlView,
+        centres: np.ndarray,
+        u_pref: np.ndarray,
+        cruising: np.ndarray,
+        movers: np.ndarray,
     ) -> np.ndarray:
         """Clockwise turn (rad) of each cruising skid's preferred velocity: ``rvo_keep_right_rad``
         where another skid on the move within ``rvo_keep_right_range_m`` ahead comes the other
@@ -1147,6 +1154,7 @@ class Navigator:
             oncoming = u_pref[j] @ u_pref[i] < 0
             if np.any(ahead & oncoming):
                 turn[k] = p.rvo_keep_right_rad
+        self._static_points(view)
         if self._static_kd is not None and turn.any():
             clear, _ = self._static_kd.query(centres[cruising], distance_upper_bound=100.0)
             fade = (clear - p.rvo_keep_right_tight_m) / (

@@ -1,0 +1,77 @@
+"""Parts of the RVO navigation stack: the monitor's dynamic rollout, the joint check of two
+skids turning together, and the keep-right rule."""
+
+import numpy as np
+import pytest
+from helpers import Scripted, make_world
+
+from swarmpark.control.navigate import Navigator, NavParams, _RobotNav
+from swarmpark.supervisor import Supervisor
+
+
+def _two_skids(a_pose, b_pose):
+    """Two skids (poses x, y, yaw in degrees) in the 10 m x 6 m test world."""
+    return make_world(robots=[{"id": "a", "pose": a_pose}, {"id": "b", "pose": b_pose}])
+
+
+def _navigator(view) -> Navigator:
+    nav = Navigator(NavParams(avoidance="rvo"))
+    nav._robots = [_RobotNav() for _ in range(len(view.poses))]
+    nav._outlines(view)
+    nav._static_points(view)
+    return nav
+
+
+def test_rollout_follows_the_simulator_within_the_acceleration_limits():
+    world = make_world()
+    cmd = np.array([[0.1, -1.0]])
+    sup = Supervisor(world, controller=Scripted(lambda t: cmd))
+    sup.sim.vel[:] = [[0.4, 0.8]]  # turning left fast; told to turn right
+    view = sup.view()
+    times = np.array([0.2, 0.5, 1.0])
+    predicted = _navigator(view)._rollout(view, np.array([0]), cmd[:, 0], cmd[:, 1], times)[0]
+    actual = []
+    for _ in range(20):
+        sup.sim.step(cmd)
+        if any(abs(sup.sim.t - t) < 1e-9 for t in times):
+            actual.append(sup.sim.poses[0].copy())
+    assert np.allclose(predicted, np.array(actual), atol=1e-9)
+    # It keeps turning left for 0.4 s before the right turn starts.
+    assert predicted[0, 2] > view.poses[0, 2]
+
+
+def test_joint_check_stops_two_skids_that_would_swing_their_corners_together():
+    # Side by side with a 0.25 m gap: each turning in place is clear of the other standing
+    # still, but the two front corners swing towards each other at the same time.
+    sup = Supervisor(_two_skids([5.0, 2.0, 0.0], [5.0, 3.05, 0.0]))
+    view = sup.view()
+    raw = np.array([[0.0, 0.3], [0.0, -0.3]])
+    idx = np.array([0, 1])
+    alone = _navigator(view)._monitor(view, idx, raw)
+    assert np.array_equal(alone, raw)
+    together = _navigator(view)._monitor(view, idx, raw, joint=True)
+    assert np.array_equal(together, np.zeros((2, 2)))
+    # Turning the same way, the corners move apart in step: both keep their commands.
+    same = np.array([[0.0, 0.3], [0.0, 0.3]])
+    assert np.array_equal(_navigator(view)._monitor(view, idx, same, joint=True), same)
+
+
+@pytest.mark.parametrize(
+    ("y", "expected"),
+    [(3.0, 1.0), (1.5, 1.0 / 3.0)],  # open (3 m from the walls), then 1.5 m from a wall
+)
+def test_keep_right_turns_oncoming_skids_and_fades_near_walls(y, expected):
+    # a heading +x, b 4 m ahead heading -x: they come towards each other.
+    sup = Supervisor(_two_skids([3.0, y, 0.0], [7.0, y, 180.0]))
+    view = sup.view()
+    nav = _navigator(view)
+    centres = view.poses[:, :2]
+    u = np.array([[0.5, 0.0], [-0.5, 0.0]])
+    movers = np.array([True, True])
+    turn = nav._keep_right(view, centres, u, np.array([0, 1]), movers)
+    assert turn == pytest.approx(nav.params.rvo_keep_right_rad * expected * np.ones(2))
+    # Going the same way, or with the other one behind: no turn.
+    same = np.array([[0.5, 0.0], [0.5, 0.0]])
+    assert not nav._keep_right(view, centres, same, np.array([0, 1]), movers).any()
+    apart = np.array([[-0.5, 0.0], [0.5, 0.0]])
+    assert not nav._keep_right(view, centres, apart, np.array([0, 1]), movers).any()
