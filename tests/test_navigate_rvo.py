@@ -68,10 +68,15 @@ def test_keep_right_turns_oncoming_skids_and_fades_near_walls(y, expected):
     centres = view.poses[:, :2]
     u = np.array([[0.5, 0.0], [-0.5, 0.0]])
     movers = np.array([True, True])
-    turn = nav._keep_right(view, centres, u, np.array([0, 1]), movers)
+    both = np.array([0, 1])
+    equal = np.array([1.0, 1.0])
+    turn = nav._keep_right(view, centres, u, equal, both, movers)
     assert turn == pytest.approx(nav.params.rvo_keep_right_rad * expected * np.ones(2))
+    # The lower priority (b: a third of a's) takes the larger share of the turn.
+    low = nav._keep_right(view, centres, u, np.array([3.0, 1.0]), both, movers)
+    assert low[1] > 1.5 * low[0] > 0.0
     # Going the same way, or with the other one behind: no turn.
     same = np.array([[0.5, 0.0], [0.5, 0.0]])
-    assert not nav._keep_right(view, centres, same, np.array([0, 1]), movers).any()
+    assert not nav._keep_right(view, centres, same, equal, both, movers).any()
     apart = np.array([[-0.5, 0.0], [0.5, 0.0]])
-    assert not nav._keep_right(view, centres, apart, np.array([0, 1]), movers).any()
+    assert not nav._keep_right(view, centres, apart, equal, both, movers).any()

@@ -1071,15 +1071,18 @@ class Navigator:
         margin = err + np.where(settled | immobile, 0.0, p.rvo_margin_m)
         centres, shapes = skid_shapes(view.poses, self._plain, offset_m=d, margin_m=margin)
         bump = self._deadlock_recovery(view, settled)
+        steered = np.zeros(len(view.poses), dtype=bool)  # preferred velocity turned off the path
         if len(cruising):
             to_aim = aims[:, :2] - centres[cruising]
             dist = np.linalg.norm(to_aim, axis=1, keepdims=True)
             u_pref[cruising] = to_aim / np.maximum(dist, 1e-9) * u_lim[cruising, None]
             movers = ~settled & ~immobile & view.active
-            turn = self._keep_right(view, centres, u_pref, cruising, movers)
+            prio_now = view.priority + bump
+            turn = self._keep_right(view, centres, u_pref, prio_now, cruising, movers)
             side = np.array([view.t < self._robots[i].sidestep_until for i in cruising], bool)
             turn[side] = np.pi / 2
             u_pref[cruising] = np.einsum("nij,nj->ni", rotation(-turn), u_pref[cruising])
+            steered[cruising] = turn != 0
         # Backing out (a recovery): straight along the axis at half speed.
         backing = np.array([r.backout_left > 0 for r in self._robots], dtype=bool) & ~immobile
         for i in np.flatnonzero(backing):
@@ -1122,8 +1125,8 @@ class Navigator:
             if nav.stalled_s >= p.stall_s:  # backing out is blocked too
                 nav.backout_left = 0.0
         # Pure turns in place (u = 0 at the centre would drop them) pass through when ORCA
-        # left the preferred velocity unchanged.
-        same = (np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9) & ~on_axis
+        # left the preferred velocity unchanged (and it was the path's, not kept right).
+        same = (np.linalg.norm(res.velocities - u_pref, axis=1) < 1e-9) & ~on_axis & ~steered
         out[same] = raw[same]
         out[immobile] = 0.0
         return out
@@ -1133,12 +1136,20 @@ class Navigator:
         view: ControlView,
         centres: np.ndarray,
         u_pref: np.ndarray,
+        prio: np.ndarray,
         cruising: np.ndarray,
         movers: np.ndarray,
     ) -> np.ndarray:
-        """Clockwise turn (rad) of each cruising skid's preferred velocity: ``rvo_keep_right_rad``
-        where another skid on the move within ``rvo_keep_right_range_m`` ahead comes the other
-        way (their preferred velocities more than 90 degrees apart), else 0."""
+        """Clockwise turn (rad) of each cruising skid's preferred velocity where another skid
+        on the move within ``rvo_keep_right_range_m`` ahead comes the other way (their
+        preferred velocities more than 90 degrees apart), else 0.
+
+        The turn is ``rvo_keep_right_rad`` times twice the skid's largest ORCA share against
+        those skids (:func:`.rvo.responsibility_shares`), at most 90 degrees: between equal
+        priorities each turns ``rvo_keep_right_rad``, and the lower priority turns more.
+        """
+        from .rvo import responsibility_shares
+
         p = self.params
         turn = np.zeros(len(cruising))
         if p.rvo_keep_right_rad == 0 or movers.sum() < 2:
@@ -1152,8 +1163,10 @@ class Navigator:
             j = j[j != i]
             ahead = (centres[j] - centres[i]) @ u_pref[i] > 0
             oncoming = u_pref[j] @ u_pref[i] < 0
-            if np.any(ahead & oncoming):
-                turn[k] = p.rvo_keep_right_rad
+            meet = j[ahead & oncoming]
+            if len(meet):
+                share = responsibility_shares(prio[i], prio[meet], p.rvo_min_share).max()
+                turn[k] = min(2.0 * share * p.rvo_keep_right_rad, np.pi / 2)
         self._static_points(view)
         if self._static_kd is not None and turn.any():
             clear, _ = self._static_kd.query(centres[cruising], distance_upper_bound=100.0)
