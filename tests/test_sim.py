@@ -6,7 +6,8 @@ from helpers import make_world
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmpark.sim import Simulator, integrate_unicycle
+from swarmpark.geometry import integrate_unicycle
+from swarmpark.sim import Simulator
 from swarmpark.supervisor import Supervisor
 
 

@@ -30,7 +30,7 @@ from .geometry import (
 )
 from .scenario import World
 
-__all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M", "integrate_unicycle"]
+__all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M"]
 
 #: Clearances beyond this distance are not tracked (reported as this value).
 CLEARANCE_RANGE_M = 2.0

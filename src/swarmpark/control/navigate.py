@@ -571,9 +571,7 @@ class Navigator:
                 if np.linalg.norm(away) > p.yield_clear_m:
                     nav.yield_until = -np.inf
                     continue
-                th = view.poses[i, 2]
-                along = away[0] * np.cos(th) + away[1] * np.sin(th)
-                out[k] = (0.5 * view.max_speed[i] * np.sign(along + 1e-9), 0.0)
+                out[k] = (0.5 * view.max_speed[i] * self._axis_away(view, i, j), 0.0)
         return out
 
     def _hold_outside(self, view: ControlView, idx: np.ndarray, cmd: np.ndarray) -> None:
@@ -988,15 +986,20 @@ class Navigator:
                 acts.append("side step")
         return bump
 
+    @staticmethod
+    def _axis_away(view: ControlView, i: int, j: int) -> float:
+        """+1 or -1: the direction along skid ``i``'s axis away from skid ``j``."""
+        away = view.poses[i, :2] - view.poses[j, :2]
+        th = view.poses[i, 2]
+        return float(np.sign(away[0] * np.cos(th) + away[1] * np.sin(th) + 1e-9))
+
     def _away_from_nearest(self, view: ControlView, i: int) -> float:
         """+1 or -1: the direction along skid ``i``'s axis away from the nearest other skid."""
         others = np.delete(np.arange(len(view.poses)), i)
         if not len(others):
             return -1.0
-        d = view.poses[others, :2] - view.poses[i, :2]
-        j = np.argmin(np.linalg.norm(d, axis=1))
-        h = np.array([np.cos(view.poses[i, 2]), np.sin(view.poses[i, 2])])
-        return -1.0 if float(d[j] @ h) >= 0 else 1.0
+        d = np.linalg.norm(view.poses[others, :2] - view.poses[i, :2], axis=1)
+        return self._axis_away(view, i, int(others[np.argmin(d)]))
 
     @staticmethod
     def _close_recovery(nav: _RobotNav, t: float) -> None:
