@@ -16,10 +16,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from swarmpark.gridmap import load_map_yaml  # noqa: E402
-from swarmpark.mapping_run import build_map  # noqa: E402
-from swarmpark.run import run_world  # noqa: E402
-from swarmpark.scenario import build_world, load_scenario  # noqa: E402
+from swarmpark.apps.mapping_run import build_map  # noqa: E402
+from swarmpark.apps.run import run_world  # noqa: E402
+from swarmpark.core.gridmap import load_map_yaml  # noqa: E402
+from swarmpark.world.scenario import build_world, load_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCN = ROOT / "scenarios"

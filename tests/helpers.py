@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 from shapely.geometry import Polygon, box
 
-from swarmpark.geometry import wrap_angle
-from swarmpark.gridmap import OccupancyGrid, grid_from_walls
-from swarmpark.scenario import build_world, parse_scenario
+from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.gridmap import OccupancyGrid, grid_from_walls
+from swarmpark.world.scenario import build_world, parse_scenario
 
 
 def make_world(**overrides):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
-from swarmpark.geometry import Footprint, footprint_corners
-from swarmpark.gridmap import grid_from_walls
+from swarmpark.core.geometry import Footprint, footprint_corners
+from swarmpark.core.gridmap import grid_from_walls
 from swarmpark.sense.costmap import CostmapConfig, LocalCostmap
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 

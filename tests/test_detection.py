@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmpark.run import run_world
-from swarmpark.scenario import build_world, load_scenario
-from swarmpark.supervisor import Supervisor
+from swarmpark.apps.run import run_world
+from swarmpark.supervisor.core import Supervisor
+from swarmpark.world.scenario import build_world, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 CRATE = (6.5, 5.0, 7.5, 6.8)  # x0, y0, x1, y1 of the crate in room-detect.yaml

@@ -8,7 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from swarmpark.control.formation import (
+from swarmpark.control.formation.paper import (
+    experiment_problem,
+    paper_problem,
+    run_obstacle_experiment,
+    run_paper,
+)
+from swarmpark.control.formation.planner import (
     FormationProblem,
     OnlineAdjuster,
     TrackingGains,
@@ -23,13 +29,7 @@ from swarmpark.control.formation import (
     sample_reference,
     track_unicycle,
 )
-from swarmpark.control.formation_paper import (
-    experiment_problem,
-    paper_problem,
-    run_obstacle_experiment,
-    run_paper,
-)
-from swarmpark.paths import SplinePath
+from swarmpark.core.paths import SplinePath
 
 TOL_V = 1e-9  # speeds are clipped to their bounds after the solve
 TOL_CON = 1e-6  # IPOPT's constraint tolerance is 1e-8 on the scaled problem
@@ -211,7 +211,7 @@ def test_formation_method_has_lowest_error_on_the_paper_problem(paper_plans):
 
 
 def test_candidate_pairs_never_drop_a_pair_that_can_collide(paper):
-    from swarmpark.control.formation import _candidate_pairs, _reach_bounds
+    from swarmpark.control.formation.planner import _candidate_pairs, _reach_bounds
 
     lo, hi = _reach_bounds(paper)
     ci, cj, cm = _candidate_pairs(paper, lo, hi)

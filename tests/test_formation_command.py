@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from helpers import make_world
 
-from swarmpark.scenario import FormationCmd, ScenarioError
-from swarmpark.supervisor import Supervisor
+from swarmpark.supervisor.core import Supervisor
+from swarmpark.world.scenario import FormationCmd, ScenarioError
 
 ROBOTS = [{"id": "a", "pose": [3.0, 3.0, 0.0]}, {"id": "b", "pose": [1.5, 3.0, 0.0]}]
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point
 
-from swarmpark.geometry import (
+from swarmpark.core.geometry import (
     Footprint,
     GeometryError,
     as_simple_polygon,

@@ -6,7 +6,7 @@ import yaml
 from PIL import Image
 from shapely.geometry import Polygon
 
-from swarmpark.gridmap import MapError, grid_from_walls, load_map_yaml, save_map_yaml
+from swarmpark.core.gridmap import MapError, grid_from_walls, load_map_yaml, save_map_yaml
 
 # A 6 x 4 map at 1 m per cell; rows printed top (y = 3) to bottom (y = 0).
 PICTURE = """
@@ -20,7 +20,7 @@ PICTURE = """
 def picture_grid():
     rows = [list(r) for r in PICTURE.strip().splitlines()]
     occ = np.flipud(np.array([[c == "#" for c in r] for r in rows]))
-    from swarmpark.gridmap import OccupancyGrid
+    from swarmpark.core.gridmap import OccupancyGrid
 
     return OccupancyGrid(occ, 1.0, (10.0, 20.0))
 

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, reject, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon, box
 
-from swarmpark.geometry import Footprint, GeometryError, footprint_polygon
+from swarmpark.core.geometry import Footprint, GeometryError, footprint_polygon
 from swarmpark.layout import METHODS, LayoutError, candidate_headings, capacity, layout
 from swarmpark.layout.validate import check_layout
 

@@ -9,9 +9,9 @@ import pytest
 from PIL import Image
 from shapely.geometry import box
 
-from swarmpark.cli_layout import layout_command
-from swarmpark.geometry import Footprint, footprint_polygon
-from swarmpark.gridmap import grid_from_walls, save_map_yaml
+from swarmpark.apps.cli_layout import layout_command
+from swarmpark.core.geometry import Footprint, footprint_polygon
+from swarmpark.core.gridmap import grid_from_walls, save_map_yaml
 
 SQUARE = "[[0,0],[4,0],[4,4],[0,4]]"
 ELEVATOR = "[[0,0],[7,0],[7,4],[0,4]]"

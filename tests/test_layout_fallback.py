@@ -1,7 +1,7 @@
 """A convex layout that fails validation falls back to stacking, with a notice (regression:
 a non-convex decagon where the convex pieces put a footprint outside the margin)."""
 
-from swarmpark.geometry import Footprint
+from swarmpark.core.geometry import Footprint
 from swarmpark.layout import layout
 
 DECAGON = [

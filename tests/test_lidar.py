@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LineString, Point, box
 
-from swarmpark.geometry import Footprint, footprint_corners, wrap_angle
-from swarmpark.gridmap import OccupancyGrid, grid_from_walls
+from swarmpark.core.geometry import Footprint, footprint_corners, wrap_angle
+from swarmpark.core.gridmap import OccupancyGrid, grid_from_walls
 from swarmpark.sense.lidar import (
     LidarSpec,
     _ray_convex,

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import box
 
-from swarmpark.geometry import Footprint, footprint_corners, wrap_angle
-from swarmpark.gridmap import grid_from_walls
+from swarmpark.core.geometry import Footprint, footprint_corners, wrap_angle
+from swarmpark.core.gridmap import grid_from_walls
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.localize import (
     RECOVERY,

@@ -6,10 +6,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from swarmpark.cli import main
-from swarmpark.gridmap import load_map_yaml
-from swarmpark.run import run_world
-from swarmpark.scenario import build_world, parse_scenario
+from swarmpark.apps.cli import main
+from swarmpark.apps.run import run_world
+from swarmpark.core.gridmap import load_map_yaml
+from swarmpark.world.scenario import build_world, parse_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import box
 
-from swarmpark.geometry import wrap_angle
-from swarmpark.gridmap import OccupancyGrid, grid_from_walls, load_map_yaml, save_map_yaml
+from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.gridmap import OccupancyGrid, grid_from_walls, load_map_yaml, save_map_yaml
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.localize import LikelihoodField, OdometryDrift, ParticleFilter
 from swarmpark.sense.mapping import (

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from helpers import Scripted, make_world
 
+from swarmpark.apps.run import run_world
 from swarmpark.metrics import lower_bound_s
-from swarmpark.run import run_world
 
 
 def straight_run(**kw):

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from helpers import Scripted, make_world
 
-from swarmpark.control.navigate import Navigator, NavParams, _RobotNav
-from swarmpark.supervisor import Supervisor
+from swarmpark.control.nav.navigator import Navigator, NavParams, _RobotNav
+from swarmpark.supervisor.core import Supervisor
 
 
 def _two_skids(a_pose, b_pose):

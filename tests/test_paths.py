@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmpark.paths import PathError, SplinePath
+from swarmpark.core.paths import PathError, SplinePath
 
 
 def test_straight_segment_is_exact():

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from shapely.geometry import LineString, box
 
-from swarmpark.gridmap import grid_from_walls
-from swarmpark.plan import build_costmap, path_length, paths_from, plan_path
+from swarmpark.core.gridmap import grid_from_walls
+from swarmpark.plan.grid import build_costmap, path_length, paths_from, plan_path
 
 WALL = box(4, 0, 4.5, 4.5)
 

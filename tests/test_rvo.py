@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 
-from swarmpark.control.rvo import (
+from swarmpark.control.orca.kernel import (
     HalfPlanes,
     OrcaParams,
     disc_polygons,
@@ -30,7 +30,7 @@ from swarmpark.control.rvo import (
     tracking_error_bound,
     unicycle_to_holonomic,
 )
-from swarmpark.geometry import Footprint, convex_gap, rect_disc_gap, rotation
+from swarmpark.core.geometry import Footprint, convex_gap, rect_disc_gap, rotation
 
 SKID = Footprint(length_m=1.25, width_m=0.75)
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])

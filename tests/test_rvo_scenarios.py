@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import yaml
 
-from swarmpark.control.rvo import orca_step
-from swarmpark.geometry import Footprint, footprint_corners, rect_disc_gap
-from swarmpark.run import run_world
-from swarmpark.scenario import build_world, load_scenario, parse_scenario
-from swarmpark.supervisor import Supervisor
+from swarmpark.apps.run import run_world
+from swarmpark.control.orca.kernel import orca_step
+from swarmpark.core.geometry import Footprint, footprint_corners, rect_disc_gap
+from swarmpark.supervisor.core import Supervisor
+from swarmpark.world.scenario import build_world, load_scenario, parse_scenario
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import yaml
 
-from swarmpark.cli import main
-from swarmpark.scenario import ScenarioError, build_world, load_scenario, parse_scenario
+from swarmpark.apps.cli import main
+from swarmpark.world.scenario import ScenarioError, build_world, load_scenario, parse_scenario
 
 BASE = {
     "name": "t",

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from swarmpark.run import run_world
-from swarmpark.scenario import build_world, load_scenario
+from swarmpark.apps.run import run_world
+from swarmpark.world.scenario import build_world, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 #: Run with more checks elsewhere: room-park-built by tests/test_map_command.py on a map built

@@ -20,10 +20,10 @@ with warnings.catch_warnings():
     warnings.filterwarnings("ignore", message=".*httpx2.*")
     from fastapi.testclient import TestClient
 
-from swarmpark.scenario import ScenarioError
 from swarmpark.server import create_app
 from swarmpark.server.cli import serve_command
 from swarmpark.server.engine import MAX_TICKS_PER_FRAME, TELEOP_DEADMAN_S, Session
+from swarmpark.world.scenario import ScenarioError
 
 DATA = Path(__file__).parent / "data"
 SMALL = DATA / "ui-small.yaml"
@@ -586,7 +586,9 @@ def test_delta_frames_carry_slow_parts_only_when_they_change():
     d2, _ = s.encoder.frame(s.sim_extra())
     assert not {"goals", "paths", "groups", "log"} & set(d2)
     s.sup.goto(
-        __import__("swarmpark.scenario", fromlist=["GotoCmd"]).GotoCmd(robot="s2", pose=[5, 4, 0])
+        __import__("swarmpark.world.scenario", fromlist=["GotoCmd"]).GotoCmd(
+            robot="s2", pose=[5, 4, 0]
+        )
     )
     s.step(1)
     d3, _ = s.encoder.frame(s.sim_extra())

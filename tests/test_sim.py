@@ -6,9 +6,9 @@ from helpers import make_world
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmpark.geometry import integrate_unicycle
-from swarmpark.sim import Simulator
-from swarmpark.supervisor import Supervisor
+from swarmpark.core.geometry import integrate_unicycle
+from swarmpark.sim.simulator import Simulator
+from swarmpark.supervisor.core import Supervisor
 
 
 def test_unicycle_arc_is_exact():
@@ -129,7 +129,7 @@ def test_estop_is_latched_until_resume():
 
 
 def test_same_seed_same_result():
-    from swarmpark.run import run_world
+    from swarmpark.apps.run import run_world
 
     data = dict(
         robots=[{"id": "a", "pose": [2.0, 2.0, 0.0]}, {"id": "b", "pose": [2.0, 4.0, 0.0]}],

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .assign import AssignmentError, bottleneck_assignment
-from .geometry import point_segment_distance, wrap_angle
-from .gridmap import OccupancyGrid
-from .plan import build_costmap, path_length_matrix
+from swarmpark.assign import AssignmentError, bottleneck_assignment
+from swarmpark.core.geometry import point_segment_distance, wrap_angle
+from swarmpark.core.gridmap import OccupancyGrid
+from swarmpark.plan.grid import build_costmap, path_length_matrix
 
 __all__ = [
     "POSITION_TOL_M",

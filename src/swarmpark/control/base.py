@@ -12,8 +12,8 @@ from typing import Protocol
 
 import numpy as np
 
-from ..geometry import Footprint
-from ..gridmap import OccupancyGrid
+from swarmpark.core.geometry import Footprint
+from swarmpark.core.gridmap import OccupancyGrid
 
 __all__ = ["ControlView", "Controller"]
 

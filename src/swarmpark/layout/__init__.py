@@ -6,7 +6,7 @@ the whole footprint), ``"potential"`` (2018 eqs. 1-4, from the stacking result) 
 layout is validated (inside the free region with the margin, no two skids within the
 margin) and comes with a deepest-first fill order from the opening.
 
->>> from swarmpark.geometry import Footprint
+>>> from swarmpark.core.geometry import Footprint
 >>> res = layout([[0, 0], [6, 0], [6, 4], [0, 4]], [Footprint(1.2, 0.8)] * 4)
 >>> res.poses.shape, res.report["egress_ok"]
 ((4, 3), True)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmpark.geometry import Footprint, wrap_angle
+from swarmpark.core.geometry import Footprint, wrap_angle
 from swarmpark.layout import stacking
 from swarmpark.layout.egress import default_opening, egress_order
 from swarmpark.layout.region import (
@@ -270,7 +270,7 @@ def layout(
         Simple polygon: shapely ``Polygon`` (holes count as obstacles) or ``[[x, y], ...]``.
         May be non-convex.
     footprints
-        One :class:`~swarmpark.geometry.Footprint` per skid (mixed sizes allowed).
+        One :class:`~swarmpark.core.geometry.Footprint` per skid (mixed sizes allowed).
     heading
         Yaw of every parked skid, radians, or ``"auto"``: the candidate heading (see
         :func:`candidate_headings`) with the most room, measured by how many of the largest

@@ -503,7 +503,7 @@ def _piece_region(region: Region, piece: ConvexPiece) -> Region:
 
 
 def _stack_capacity(region: Region, footprint_half: np.ndarray) -> int:
-    from swarmpark.geometry import Footprint
+    from swarmpark.core.geometry import Footprint
 
     fp = Footprint(2 * float(footprint_half[0]), 2 * float(footprint_half[1]))
     upper = int(region.free.area / (4 * footprint_half[0] * footprint_half[1])) + 1

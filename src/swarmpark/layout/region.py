@@ -17,7 +17,7 @@ from shapely import affinity
 from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
-from swarmpark.geometry import Footprint, as_simple_polygon, center_to_pivot, rotation
+from swarmpark.core.geometry import Footprint, as_simple_polygon, center_to_pivot, rotation
 
 __all__ = [
     "LayoutError",

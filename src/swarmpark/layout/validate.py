@@ -3,7 +3,7 @@
 Every method's output goes through :func:`check_layout` before it is returned: footprints
 are rebuilt from the poses (so the pivot/centre conversion is checked too), then tested
 against the free region (boundary minus walls and obstacles) with shapely and against each
-other with an STR-tree and the exact convex gap of :mod:`swarmpark.geometry`.
+other with an STR-tree and the exact convex gap of :mod:`swarmpark.core.geometry`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
 
-from swarmpark.geometry import Footprint, convex_gap, footprint_corners
+from swarmpark.core.geometry import Footprint, convex_gap, footprint_corners
 from swarmpark.layout.region import MARGIN_TOL_M
 
 __all__ = ["LayoutCheck", "check_layout", "footprint_polygons"]

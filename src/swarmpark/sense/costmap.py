@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmpark.geometry import wrap_angle
-from swarmpark.gridmap import OccupancyGrid
+from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.sense.lidar import LidarSpec, scan_points, sensor_poses
 
 __all__ = ["CostmapConfig", "LocalCostmap", "Obstacles"]

@@ -2,7 +2,7 @@
 
 The default :class:`LidarSpec` is the scanner of Hing et al. 2015, Sect. 3.4: mounted at the
 skid's pivot, 360 degrees at 0.36 degree resolution (1000 beams), 5 m range. A scan sees the
-static map (an :class:`~swarmpark.gridmap.OccupancyGrid`, whose outside counts as occupied),
+static map (an :class:`~swarmpark.core.gridmap.OccupancyGrid`, whose outside counts as occupied),
 convex world polygons (other skids' footprints, triangulated static obstacles) and discs
 (people). Each robot can be told not to see polygons it owns (its own footprint).
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmpark.gridmap import OccupancyGrid
+from swarmpark.core.gridmap import OccupancyGrid
 
 __all__ = ["LidarSpec", "GridField", "prepare_grid", "scan", "scan_points", "beam_angles"]
 
@@ -350,7 +350,7 @@ def scan(
         call), a :class:`GridField` from :func:`prepare_grid` (do this in loops), or ``None``.
     polygons
         ``(P, K, 2)`` convex counter-clockwise world polygons (skid footprints, triangulated
-        obstacles); pad shorter ones with :func:`swarmpark.geometry.pad_polygons`.
+        obstacles); pad shorter ones with :func:`swarmpark.core.geometry.pad_polygons`.
     polygon_owner
         ``(P,)`` int: index of the robot that must not see the polygon (its own footprint), or
         -1 for polygons everyone sees.
@@ -367,7 +367,7 @@ def scan(
 
     Examples
     --------
-    >>> from swarmpark.gridmap import OccupancyGrid
+    >>> from swarmpark.core.gridmap import OccupancyGrid
     >>> g = OccupancyGrid(np.zeros((40, 40), bool), 0.1)  # 4 m square; its edge is a wall
     >>> r = scan(LidarSpec(num_beams=4), np.array([[1.0, 2.0, 0.0]]), g)
     >>> r.round(6).tolist()  # beams look back, right, ahead, left

@@ -21,8 +21,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
 
-from swarmpark.geometry import Footprint, footprint_corners, pad_polygons, wrap_angle
-from swarmpark.gridmap import OccupancyGrid
+from swarmpark.core.geometry import Footprint, footprint_corners, pad_polygons, wrap_angle
+from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.sense.lidar import LidarSpec, beam_angles, scan
 
 __all__ = [
@@ -857,7 +857,7 @@ class FleetLocalizer:
 
     Examples
     --------
-    >>> from swarmpark.gridmap import OccupancyGrid
+    >>> from swarmpark.core.gridmap import OccupancyGrid
     >>> from swarmpark.sense.lidar import scan
     >>> g = OccupancyGrid(np.zeros((60, 80), bool), 0.1)
     >>> spec = LidarSpec(num_beams=360)

@@ -19,8 +19,8 @@ from PIL import Image, ImageDraw
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from swarmpark.geometry import wrap_angle
-from swarmpark.gridmap import DEFAULT_FREE_THRESH, DEFAULT_OCCUPIED_THRESH, OccupancyGrid
+from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.gridmap import DEFAULT_FREE_THRESH, DEFAULT_OCCUPIED_THRESH, OccupancyGrid
 from swarmpark.sense.lidar import LidarSpec, beam_angles, sensor_poses
 
 __all__ = [
@@ -465,7 +465,7 @@ class GridMapper:
         """The map as an :class:`OccupancyGrid` with map_server's trinary thresholds: cells
         above ``occupied_thresh`` are occupied, below ``free_thresh`` free, the rest (and
         everything never observed) unknown. Save it with
-        :func:`swarmpark.gridmap.save_map_yaml`."""
+        :func:`swarmpark.core.gridmap.save_map_yaml`."""
         if not 0 < free_thresh < occupied_thresh < 1:
             raise ValueError(
                 "mapper: need 0 < free_thresh < occupied_thresh < 1 "

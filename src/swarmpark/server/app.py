@@ -16,9 +16,9 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from .engine import Session
-from .frames import jsonable
-from .routers import commands, sim, state
+from swarmpark.server.engine import Session
+from swarmpark.server.frames import jsonable
+from swarmpark.server.routers import commands, sim, state
 
 __all__ = [
     "create_app",
@@ -127,7 +127,7 @@ def create_app(
 
     Raises
     ------
-    swarmpark.scenario.ScenarioError
+    swarmpark.world.scenario.ScenarioError
         The scenario is invalid. FileNotFoundError: no scenario given and no default.
     """
     sdir = Path(scenarios_dir) if scenarios_dir is not None else default_scenarios_dir()

@@ -27,7 +27,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .schemas import MAX_SPEED_FACTOR, MIN_SPEED_FACTOR
+    from swarmpark.server.schemas import MAX_SPEED_FACTOR, MIN_SPEED_FACTOR
 
     p = _Parser(
         prog="swarmpark serve",
@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _check(args) -> None:
-    from .schemas import MAX_SPEED_FACTOR, MIN_SPEED_FACTOR
+    from swarmpark.server.schemas import MAX_SPEED_FACTOR, MIN_SPEED_FACTOR
 
     if not 0 < args.port < 65536:
         raise _BadInput(f"swarmpark serve: error: --port must be 1..65535 (got {args.port})")
@@ -80,8 +80,8 @@ def _is_loopback(host: str) -> bool:
 
 def serve_command(argv: list[str]) -> int:
     """Parse ``argv`` (the words after ``serve``), build the app and run it until Ctrl-C."""
-    from ..scenario import ScenarioError
-    from .app import create_app
+    from swarmpark.server.app import create_app
+    from swarmpark.world.scenario import ScenarioError
 
     try:
         try:

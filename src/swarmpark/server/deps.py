@@ -7,7 +7,7 @@ from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
 
-from .engine import Session
+from swarmpark.server.engine import Session
 
 __all__ = ["get_session", "require_control", "has_control", "AUTH_HEADER", "SessionDep"]
 

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scenario import World, build_world, load_scenario
-from ..supervisor import TELEOP_TIMEOUT_S, Outcome, Supervisor
-from .frames import FrameEncoder, map_png, world_info
+from swarmpark.server.frames import FrameEncoder, map_png, world_info
+from swarmpark.supervisor.core import TELEOP_TIMEOUT_S, Outcome, Supervisor
+from swarmpark.world.scenario import World, build_world, load_scenario
 
 __all__ = ["Session", "Client", "FRAME_HZ", "TELEOP_DEADMAN_S"]
 
@@ -123,7 +123,7 @@ class Session:
     # ------------------------------------------------------------------ scenario
 
     def load(self, path: str | Path, *, scripted: bool = True) -> None:
-        """Load a scenario (raises :class:`~swarmpark.scenario.ScenarioError`, changing
+        """Load a scenario (raises :class:`~swarmpark.world.scenario.ScenarioError`, changing
         nothing, if it is bad)."""
         path = Path(path)
         scn = load_scenario(path)

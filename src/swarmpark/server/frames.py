@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..supervisor import ROBOT_STATES, Supervisor
+from swarmpark.supervisor.core import ROBOT_STATES, Supervisor
 
 __all__ = ["FrameEncoder", "world_info", "map_png", "jsonable", "SLOW_KEYS"]
 

@@ -1,8 +1,8 @@
 """Request and response schemas of the operator API (pydantic), kept apart from the core.
 
 Poses at this edge are ``[x_m, y_m, heading_deg]`` as in the scenario schema, and the park
-and goto requests *are* the scenario's :class:`~swarmpark.scenario.ParkCmd` and
-:class:`~swarmpark.scenario.GotoCmd`: a command that works in a scenario file works here.
+and goto requests *are* the scenario's :class:`~swarmpark.world.scenario.ParkCmd` and
+:class:`~swarmpark.world.scenario.GotoCmd`: a command that works in a scenario file works here.
 Every model forbids unknown keys, so a misspelt field is a 422 naming it, never ignored.
 """
 
@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from ..scenario import GotoCmd, ParkCmd
+from swarmpark.world.scenario import GotoCmd, ParkCmd
 
 __all__ = [
     "ParkRequest",

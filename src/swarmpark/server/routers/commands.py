@@ -12,11 +12,10 @@ import numpy as np
 from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 
-from ...geometry import GeometryError
-from ...supervisor import Outcome
-from ..deps import SessionDep, require_control
-from ..frames import jsonable
-from ..schemas import (
+from swarmpark.core.geometry import GeometryError
+from swarmpark.server.deps import SessionDep, require_control
+from swarmpark.server.frames import jsonable
+from swarmpark.server.schemas import (
     CommandResult,
     GotoRequest,
     ParkRequest,
@@ -25,6 +24,7 @@ from ..schemas import (
     RobotsRequest,
     TeleopRequest,
 )
+from swarmpark.supervisor.core import Outcome
 
 __all__ = ["router"]
 

@@ -6,9 +6,15 @@ from pathlib import Path
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 
-from ...scenario import ScenarioError
-from ..deps import SessionDep, require_control
-from ..schemas import ScenarioList, ScenarioRequest, SimControlRequest, SimStatus, StepRequest
+from swarmpark.server.deps import SessionDep, require_control
+from swarmpark.server.schemas import (
+    ScenarioList,
+    ScenarioRequest,
+    SimControlRequest,
+    SimStatus,
+    StepRequest,
+)
+from swarmpark.world.scenario import ScenarioError
 
 __all__ = ["router", "list_scenarios"]
 

@@ -11,9 +11,9 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import Response
 
-from ..deps import SessionDep, has_control
-from ..engine import Client, Session
-from ..schemas import AuthStatus
+from swarmpark.server.deps import SessionDep, has_control
+from swarmpark.server.engine import Client, Session
+from swarmpark.server.schemas import AuthStatus
 
 __all__ = ["router"]
 

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from . import register, time_call
+from swarmpark.apps.bench import register, time_call
 
 # Pillars between the lattice rows and columns (the skids sit at x = 2 + 2c, y = 1.5 + 1.5r).
 HANGAR_WALLS = [
@@ -20,7 +20,7 @@ HANGAR_WALLS = [
 
 def hangar_world(n: int, duration_s: float = 600.0):
     """``n`` skids on a 2.0 x 1.5 m lattice in a 50 x 40 m hangar with pillars."""
-    from ..scenario import build_world, parse_scenario
+    from swarmpark.world.scenario import build_world, parse_scenario
 
     cols = int(np.ceil(np.sqrt(n * 1.5)))
     robots = []
@@ -48,7 +48,7 @@ def jiggle(n: int, k: int) -> np.ndarray:
 
 @register("sim.step", "one simulator step with collision checks", target="< 5 ms at N = 200")
 def bench_step(quick: bool) -> list[dict]:
-    from ..sim import Simulator
+    from swarmpark.sim.simulator import Simulator
 
     rows = []
     for n in (10, 50, 200):
@@ -76,8 +76,8 @@ def bench_step(quick: bool) -> list[dict]:
 _MEMORY_CHILD = """
 import json, resource, sys
 import numpy as np
-from swarmpark.bench.sim import hangar_world, jiggle
-from swarmpark.sim import Simulator
+from swarmpark.apps.bench.sim import hangar_world, jiggle
+from swarmpark.sim.simulator import Simulator
 from swarmpark.metrics import MetricsRecorder
 n, seconds = int(sys.argv[1]), float(sys.argv[2])
 world = hangar_world(n, seconds)

@@ -1,6 +1,6 @@
 """Move a group in formation along given paths by velocity optimization (Liu, Sun & Zhu 2010).
 
-Each robot drives along its own arc-length path (:class:`swarmpark.paths.SplinePath`); only
+Each robot drives along its own arc-length path (:class:`swarmpark.core.paths.SplinePath`); only
 the speeds are planned. The planner (Sect. II of the paper) chooses speeds ``v_i(t)`` at
 ``M + 1`` instants ``t = m dt`` so that the travel distances (trapezoid rule, eq. 7) put the
 robots where the desired formation wants them, measured by the formation error ``Q^e`` of
@@ -44,8 +44,8 @@ import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmpark.geometry import wrap_angle
-from swarmpark.paths import SplinePath
+from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.paths import SplinePath
 
 __all__ = [
     "FormationProblem",

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import shapely
 
-from swarmpark.bench import register, time_call
-from swarmpark.geometry import Footprint
+from swarmpark.apps.bench import register, time_call
+from swarmpark.core.geometry import Footprint
 from swarmpark.layout import METHODS, capacity, layout
 from swarmpark.layout.validate import footprint_polygons
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import register, time_call
+from swarmpark.apps.bench import register, time_call
 
 
 @register("nav.assign", "Hungarian assignment (formation cost)", target="< 100 ms at N = 1000")
 def bench_assign(quick: bool) -> list[dict]:
-    from ..assign import assign, cost_matrix
+    from swarmpark.assign import assign, cost_matrix
 
     rows = []
     rng = np.random.default_rng(0)
@@ -30,8 +30,8 @@ def bench_assign(quick: bool) -> list[dict]:
 def bench_plan(quick: bool) -> list[dict]:
     from shapely.geometry import box
 
-    from ..gridmap import grid_from_walls
-    from ..plan import build_costmap, plan_path
+    from swarmpark.core.gridmap import grid_from_walls
+    from swarmpark.plan.grid import build_costmap, plan_path
 
     walls = [box(5, 0, 5.5, 14), box(10, 6, 10.5, 20), box(15, 0, 15.5, 14)]
     grid = grid_from_walls((20, 20), 0.05, walls)
@@ -60,8 +60,8 @@ def bench_plan(quick: bool) -> list[dict]:
     target="< 20 ms for 50 skids",
 )
 def bench_tick(quick: bool) -> list[dict]:
-    from ..scenario import build_world, parse_scenario
-    from ..supervisor import Supervisor
+    from swarmpark.supervisor.core import Supervisor
+    from swarmpark.world.scenario import build_world, parse_scenario
 
     rows = []
     for n in (10, 50):

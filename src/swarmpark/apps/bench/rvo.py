@@ -3,9 +3,9 @@ and a dense snapshot.
 
 Every agent is a 1.25 m x 0.75 m skid rectangle facing the centre; the chosen velocities are
 integrated holonomically (the shapes keep their yaw), so the run exercises the kernel alone.
-Timing covers :func:`swarmpark.control.rvo.orca_step` only (wall and process CPU time: the
+Timing covers :func:`swarmpark.control.orca.kernel.orca_step` only (wall and process CPU time: the
 bench machine may be shared); collisions are checked after every step with the exact
-separating-axis test of :mod:`swarmpark.geometry`.
+separating-axis test of :mod:`swarmpark.core.geometry`.
 
 The driver is deliberately simple and says what it does: preferred velocity straight at the
 goal, turned ``KEEP_RIGHT_RAD`` clockwise plus seeded noise of up to ``JITTER_MPS`` (the
@@ -23,9 +23,9 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmpark.bench import register
-from swarmpark.control.rvo import OrcaParams, orca_step
-from swarmpark.geometry import TOUCH_TOLERANCE_M, Footprint, convex_gap, rotation
+from swarmpark.apps.bench import register
+from swarmpark.control.orca.kernel import OrcaParams, orca_step
+from swarmpark.core.geometry import TOUCH_TOLERANCE_M, Footprint, convex_gap, rotation
 
 __all__ = ["circle_scenario", "run_circle", "time_dense"]
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from . import register
+from swarmpark.apps.bench import register
 
 #: The acceptance target of the issue: 100 skids at 20 Hz with three browsers.
 TARGET_N, TARGET_HZ, CLIENTS = 100, 20.0, 3

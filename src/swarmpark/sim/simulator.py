@@ -18,7 +18,7 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from .geometry import (
+from swarmpark.core.geometry import (
     TOUCH_TOLERANCE_M,
     body_corners,
     convex_distance,
@@ -28,7 +28,7 @@ from .geometry import (
     pivot_to_center,
     rect_disc_gap,
 )
-from .scenario import World
+from swarmpark.world.scenario import World
 
 __all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M"]
 
@@ -60,7 +60,7 @@ class StepResult:
 
 
 class Simulator:
-    """Deterministic simulation of a :class:`~swarmpark.scenario.World`.
+    """Deterministic simulation of a :class:`~swarmpark.world.scenario.World`.
 
     State: ``t`` (s), ``poses`` ``(N, 3)`` pivot poses, ``vel`` ``(N, 2)`` actual ``(v, omega)``,
     ``person_s`` walked distance of every person.

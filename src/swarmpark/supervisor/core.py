@@ -17,12 +17,18 @@ import shapely
 from shapely.geometry import Point, Polygon
 from shapely.ops import nearest_points, unary_union
 
-from . import assign as assign_mod
-from .control.base import Controller, ControlView
-from .geometry import GeometryError, as_simple_polygon
-from .metrics import HEADING_TOL_RAD, POSITION_TOL_M, MetricsRecorder, goal_errors, lower_bound_s
-from .scenario import CommandSpec, GotoCmd, ParkCmd, World
-from .sim import Simulator
+from swarmpark import assign as assign_mod
+from swarmpark.control.base import Controller, ControlView
+from swarmpark.core.geometry import GeometryError, as_simple_polygon
+from swarmpark.metrics import (
+    HEADING_TOL_RAD,
+    POSITION_TOL_M,
+    MetricsRecorder,
+    goal_errors,
+    lower_bound_s,
+)
+from swarmpark.sim.simulator import Simulator
+from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd, World
 
 __all__ = ["Supervisor", "Outcome", "ROBOT_STATES"]
 
@@ -93,7 +99,10 @@ class Supervisor:
     def __init__(
         self, world: World, controller: Controller | None = None, link: Simulator | None = None
     ) -> None:
-        from .control.navigate import Navigator, NavParams  # the default navigation stack
+        from swarmpark.control.nav.navigator import (  # the default navigation stack
+            Navigator,
+            NavParams,
+        )
 
         self.world = world
         self.sim = link if link is not None else Simulator(world)
@@ -212,7 +221,7 @@ class Supervisor:
 
     def plan_layout(self, cmd: ParkCmd):
         """The layout a park command would produce (for previews); raises ValueError."""
-        from .layout import layout
+        from swarmpark.layout import layout
 
         idx = self._robot_indices(cmd.robots, "park.robots")
         if isinstance(idx, str):
@@ -308,7 +317,7 @@ class Supervisor:
         """
         from scipy import ndimage
 
-        from .geometry import footprint_polygon
+        from swarmpark.core.geometry import footprint_polygon
 
         n = len(goals)
         if n < 2 or n > BLOCKING_MAX_GOALS:
@@ -386,7 +395,7 @@ class Supervisor:
 
     def controller_path_lengths(self, idx: np.ndarray, goals: np.ndarray) -> np.ndarray:
         """Free-space path lengths robot -> goal ``(R, G)`` (one Dijkstra per goal)."""
-        from .plan import build_costmap, path_length_matrix
+        from swarmpark.plan.grid import build_costmap, path_length_matrix
 
         widths = [self.world.robots[i].footprint.width_m for i in idx]
         cm = build_costmap(self.world.grid, min(widths) / 2, min(widths) / 2)
@@ -410,7 +419,7 @@ class Supervisor:
 
     def _goal_reachability(self, i: int, goal: np.ndarray) -> str:
         """Reason a goal pose cannot be taken (footprint in a wall or off the map), or ''."""
-        from .geometry import convex_gap, footprint_corners
+        from swarmpark.core.geometry import convex_gap, footprint_corners
 
         corners = footprint_corners(goal[None], self.sim.corners_body[i : i + 1])
         pieces = self.sim.static_pieces
@@ -426,7 +435,7 @@ class Supervisor:
     def formation(self, cmd) -> Outcome:
         """Move a group along paths holding a formation (Liu, Sun, Zhu 2010); the group is
         handed back to the navigation stack for the final docking when the plan ends."""
-        from .control.formation_run import FormationError, FormationRun
+        from swarmpark.control.formation.run import FormationError, FormationRun
 
         idx = self._robot_indices(cmd.robots, "formation.robots")
         if isinstance(idx, str):
@@ -535,9 +544,9 @@ class Supervisor:
 
     def _start_localization(self) -> None:
         """Per-skid AMCL on simulated scans and drifting odometry (2018 paper Sect. 3.5)."""
-        from .geometry import pad_polygons, triangulate
-        from .sense.lidar import LidarSpec, prepare_grid
-        from .sense.localize import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
+        from swarmpark.core.geometry import pad_polygons, triangulate
+        from swarmpark.sense.lidar import LidarSpec, prepare_grid
+        from swarmpark.sense.localize import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
 
         cfg = self.world.scenario.sensing
         self.lidar_spec = LidarSpec(
@@ -568,7 +577,7 @@ class Supervisor:
         # Obstacle detection (Hing 2018, Sect. 3.5.1): what the scans show and the map does not
         # goes into the skids' costmap, and planning and avoidance use it instead of the
         # scenario's obstacles and people (the simulator keeps those as the truth).
-        from .sense.costmap import LocalCostmap
+        from swarmpark.sense.costmap import LocalCostmap
 
         self.costmap = LocalCostmap(self._base_grid, self.sim.n, self.lidar_spec)
         self.known_grid = self._base_grid.copy()
@@ -652,7 +661,7 @@ class Supervisor:
 
     def _sense(self) -> None:
         """Scan from the true poses (the world as it is) and update every skid's estimate."""
-        from .sense.lidar import scan
+        from swarmpark.sense.lidar import scan
 
         sim = self.sim
         skids = sim.corners()
@@ -736,7 +745,7 @@ class Supervisor:
     def _map_agreement(self) -> dict | None:
         """Agreement of the map the skids localize in (``sensing.map``) with the true map,
         when the two share a grid (a map built by ``swarmpark map`` in the same world does)."""
-        from .sense.mapping import map_agreement
+        from swarmpark.sense.mapping import map_agreement
 
         try:
             agree = map_agreement(self.world.believed_grid, self.world.grid, tolerance_cells=1)

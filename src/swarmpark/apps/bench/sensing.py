@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from . import register, time_call
+from swarmpark.apps.bench import register, time_call
 
 HANGAR_SIZE_M = (40.0, 30.0)
 RESOLUTION_M = 0.05
@@ -21,7 +21,7 @@ RESOLUTION_M = 0.05
 def _hangar():
     from shapely.geometry import box
 
-    from ..gridmap import grid_from_walls
+    from swarmpark.core.gridmap import grid_from_walls
 
     w, h = HANGAR_SIZE_M
     t = 0.2
@@ -33,7 +33,7 @@ def _hangar():
 
 def _fleet(n: int, rng: np.random.Generator):
     """``n`` skids in rows 2.0 m x 1.5 m apart (1.25 m x 0.75 m footprints), jittered."""
-    from ..geometry import Footprint, footprint_corners
+    from swarmpark.core.geometry import Footprint, footprint_corners
 
     fp = Footprint(length_m=1.25, width_m=0.75, pivot_from_rear_m=0.25)
     cols = 10
@@ -50,7 +50,7 @@ def _fleet(n: int, rng: np.random.Generator):
     target="< 50 ms per step at 50 skids",
 )
 def bench_lidar(quick: bool) -> list[dict]:
-    from ..sense.lidar import LidarSpec, prepare_grid, scan
+    from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 
     grid = _hangar()
     field = prepare_grid(grid)
@@ -104,8 +104,8 @@ def bench_lidar(quick: bool) -> list[dict]:
     target="< 20 ms for 1000 particles x 100 beams",
 )
 def bench_pf(quick: bool) -> list[dict]:
-    from ..sense.lidar import LidarSpec, prepare_grid, scan
-    from ..sense.localize import FilterConfig, LikelihoodField, ParticleFilter
+    from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
+    from swarmpark.sense.localize import FilterConfig, LikelihoodField, ParticleFilter
 
     grid = _hangar()
     spec = LidarSpec(range_noise_std_m=0.01)
@@ -188,9 +188,9 @@ def bench_pf(quick: bool) -> list[dict]:
     target="< 10 ms per scan",
 )
 def bench_mapping(quick: bool) -> list[dict]:
-    from ..sense.lidar import LidarSpec, prepare_grid, scan
-    from ..sense.localize import OdometryDrift
-    from ..sense.mapping import GridMapper
+    from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
+    from swarmpark.sense.localize import OdometryDrift
+    from swarmpark.sense.mapping import GridMapper
 
     grid = _hangar()
     field = prepare_grid(grid)
@@ -204,7 +204,7 @@ def bench_mapping(quick: bool) -> list[dict]:
     odo = OdometryDrift(truth[:1], rng=np.random.default_rng(5))
     odom = np.array([odo.step(p[None])[0] for p in truth])
     rows = []
-    from ..sense.mapping import MapperConfig
+    from swarmpark.sense.mapping import MapperConfig
 
     cases = {
         # Every scan matched and inserted: the worst case per scan.
@@ -242,8 +242,8 @@ def bench_mapping(quick: bool) -> list[dict]:
     target="a few ms per step at 50 skids",
 )
 def bench_costmap(quick: bool) -> list[dict]:
-    from ..sense.costmap import LocalCostmap
-    from ..sense.lidar import LidarSpec, prepare_grid, scan
+    from swarmpark.sense.costmap import LocalCostmap
+    from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 
     grid = _hangar()
     field = prepare_grid(grid)

@@ -14,7 +14,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.graph import MCP_Geometric
 
-from .gridmap import OccupancyGrid
+from swarmpark.core.gridmap import OccupancyGrid
 
 __all__ = [
     "paths_from",

@@ -1,0 +1,296 @@
+"""Occupancy grids: ROS map_server YAML + PGM/PNG io, polygon walls, world<->cell, inflation.
+
+Cell ``(row, col)`` covers ``x in origin_x + [col, col + 1) * resolution`` and
+``y in origin_y + [row, row + 1) * resolution``: row 0 is the *bottom* of the map (the image's
+last line), so array rows grow with world y as in REP-103. Everything outside the grid is
+treated as occupied.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import shapely
+import yaml
+from PIL import Image
+from scipy import ndimage
+from shapely.geometry import Polygon, box
+
+__all__ = ["OccupancyGrid", "MapError", "load_map_yaml", "save_map_yaml", "grid_from_walls"]
+
+# ROS map_server defaults (trinary mode).
+DEFAULT_OCCUPIED_THRESH = 0.65
+DEFAULT_FREE_THRESH = 0.196
+PGM_OCCUPIED, PGM_FREE, PGM_UNKNOWN = 0, 254, 205
+
+
+class MapError(ValueError):
+    """A map file or map description that cannot be used."""
+
+
+@dataclass
+class OccupancyGrid:
+    """A 2-D occupancy grid.
+
+    Parameters
+    ----------
+    occupied
+        ``(H, W)`` bool, True where a cell is an obstacle.
+    resolution_m
+        Cell size in metres.
+    origin
+        World ``(x, y)`` of the lower-left corner of cell ``(0, 0)``.
+    unknown
+        ``(H, W)`` bool, True where the cell was never observed (never occupied as well).
+    """
+
+    occupied: np.ndarray
+    resolution_m: float
+    origin: tuple[float, float] = (0.0, 0.0)
+    unknown: np.ndarray | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        self.occupied = np.asarray(self.occupied, dtype=bool)
+        if self.unknown is None:
+            self.unknown = np.zeros_like(self.occupied)
+        self.unknown = np.asarray(self.unknown, dtype=bool) & ~self.occupied
+        if not self.resolution_m > 0:
+            raise MapError(f"map.resolution_m must be > 0 (got {self.resolution_m})")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.occupied.shape  # type: ignore[return-value]
+
+    @property
+    def size_m(self) -> tuple[float, float]:
+        h, w = self.shape
+        return (w * self.resolution_m, h * self.resolution_m)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` in metres."""
+        w, h = self.size_m
+        return (self.origin[0], self.origin[1], self.origin[0] + w, self.origin[1] + h)
+
+    def world_to_cell(self, xy: np.ndarray) -> np.ndarray:
+        """Integer ``(row, col)`` ``(N, 2)`` of world points ``(N, 2)`` (may be out of range)."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        col = np.floor((xy[:, 0] - self.origin[0]) / self.resolution_m).astype(np.int64)
+        row = np.floor((xy[:, 1] - self.origin[1]) / self.resolution_m).astype(np.int64)
+        return np.column_stack([row, col])
+
+    def cell_to_world(self, rc: np.ndarray) -> np.ndarray:
+        """World ``(x, y)`` ``(N, 2)`` of the centres of cells ``(N, 2)`` given as (row, col)."""
+        rc = np.asarray(rc).reshape(-1, 2)
+        x = self.origin[0] + (rc[:, 1] + 0.5) * self.resolution_m
+        y = self.origin[1] + (rc[:, 0] + 0.5) * self.resolution_m
+        return np.column_stack([x, y])
+
+    def in_bounds(self, rc: np.ndarray) -> np.ndarray:
+        rc = np.asarray(rc).reshape(-1, 2)
+        h, w = self.shape
+        return (rc[:, 0] >= 0) & (rc[:, 0] < h) & (rc[:, 1] >= 0) & (rc[:, 1] < w)
+
+    def is_occupied(self, xy: np.ndarray) -> np.ndarray:
+        """Occupancy ``(N,)`` at world points; outside the grid counts as occupied."""
+        rc = self.world_to_cell(xy)
+        inside = self.in_bounds(rc)
+        out = np.ones(len(rc), dtype=bool)
+        out[inside] = self.occupied[rc[inside, 0], rc[inside, 1]]
+        return out
+
+    def distance_field(self) -> np.ndarray:
+        """Distance ``(H, W)`` in metres from each cell centre to the nearest occupied cell's
+        boundary (0 in occupied cells). The map edge counts as occupied."""
+        padded = np.pad(~self.occupied, 1, constant_values=False)
+        d = ndimage.distance_transform_edt(padded)[1:-1, 1:-1]
+        return np.maximum(d - 0.5, 0.0) * self.resolution_m
+
+    def inflate(self, radius_m: float) -> np.ndarray:
+        """Cells ``(H, W)`` whose centre lies within ``radius_m`` of an obstacle (or occupied)."""
+        return self.distance_field() <= radius_m
+
+    def boundary_cells(self) -> np.ndarray:
+        """``(row, col)`` of occupied cells with a free 4-neighbour (the only ones a body can
+        reach without first crossing another occupied cell) and of occupied cells on the edge."""
+        occ = self.occupied
+        free = np.pad(~occ, 1, constant_values=True)
+        neigh = free[:-2, 1:-1] | free[2:, 1:-1] | free[1:-1, :-2] | free[1:-1, 2:]
+        return np.argwhere(occ & neigh)
+
+    def cell_squares(self, rc: np.ndarray) -> np.ndarray:
+        """Counter-clockwise corner squares ``(N, 4, 2)`` of cells ``(N, 2)``."""
+        r = self.resolution_m
+        lo = np.column_stack([self.origin[0] + rc[:, 1] * r, self.origin[1] + rc[:, 0] * r]).astype(
+            float
+        )
+        offsets = np.array([[0, 0], [r, 0], [r, r], [0, r]], dtype=float)
+        return lo[:, None, :] + offsets[None]
+
+    def occupied_geometry(self, region: Polygon | None = None):
+        """Occupied cells (optionally only those touching ``region``) as one shapely geometry."""
+        rc = np.argwhere(self.occupied)
+        if region is not None and len(rc):
+            xmin, ymin, xmax, ymax = region.bounds
+            lo = self.world_to_cell(np.array([[xmin, ymin]]))[0]
+            hi = self.world_to_cell(np.array([[xmax, ymax]]))[0]
+            keep = (rc[:, 0] >= lo[0]) & (rc[:, 0] <= hi[0]) & (rc[:, 1] >= lo[1])
+            rc = rc[keep & (rc[:, 1] <= hi[1])]
+        if len(rc) == 0:
+            return shapely.Polygon()
+        sq = self.cell_squares(rc)
+        cells = shapely.box(sq[:, 0, 0], sq[:, 0, 1], sq[:, 2, 0], sq[:, 2, 1])
+        geom = shapely.union_all(cells)
+        return geom if region is None else geom.intersection(region.buffer(self.resolution_m))
+
+    def coarsen(self, factor: int) -> OccupancyGrid:
+        """A grid with ``factor`` x ``factor`` cells merged: occupied if any is (conservative),
+        unknown if all free ones are unknown. Partial blocks at the top and right edges are
+        padded as occupied."""
+        if factor <= 1:
+            return self
+        h, w = self.shape
+        H, W = -(-h // factor), -(-w // factor)
+        occ = np.ones((H * factor, W * factor), dtype=bool)
+        occ[:h, :w] = self.occupied
+        unk = np.ones_like(occ)
+        unk[:h, :w] = self.unknown | self.occupied
+        occ = occ.reshape(H, factor, W, factor).any(axis=(1, 3))
+        unk = unk.reshape(H, factor, W, factor).all(axis=(1, 3)) & ~occ
+        return OccupancyGrid(occ, self.resolution_m * factor, self.origin, unk)
+
+    def copy(self) -> OccupancyGrid:
+        return OccupancyGrid(
+            self.occupied.copy(), self.resolution_m, self.origin, self.unknown.copy()
+        )
+
+    def with_polygons(self, polygons: list[Polygon]) -> OccupancyGrid:
+        """A copy with the cells covered by the polygons marked occupied."""
+        out = self.copy()
+        for poly in polygons:
+            out.occupied |= _rasterize(poly, out)
+        out.unknown &= ~out.occupied
+        return out
+
+
+def _rasterize(poly: Polygon, grid: OccupancyGrid) -> np.ndarray:
+    """Cells whose square overlaps the polygon's interior (conservative: partial cells and thin
+    walls are marked; a cell that only touches the polygon's edge is not)."""
+    mask = np.zeros(grid.shape, dtype=bool)
+    xmin, ymin, xmax, ymax = poly.bounds
+    lo = grid.world_to_cell(np.array([[xmin, ymin]]))[0]
+    hi = grid.world_to_cell(np.array([[xmax, ymax]]))[0]
+    h, w = grid.shape
+    r0, r1 = max(lo[0], 0), min(hi[0], h - 1)
+    c0, c1 = max(lo[1], 0), min(hi[1], w - 1)
+    if r0 > r1 or c0 > c1:
+        return mask
+    rr, cc = np.mgrid[r0 : r1 + 1, c0 : c1 + 1]
+    rc = np.column_stack([rr.ravel(), cc.ravel()])
+    sq = grid.cell_squares(rc)
+    inset = 1e-6 * grid.resolution_m  # so that sharing an edge is not overlapping
+    boxes = shapely.box(
+        sq[:, 0, 0] + inset, sq[:, 0, 1] + inset, sq[:, 2, 0] - inset, sq[:, 2, 1] - inset
+    )
+    shapely.prepare(poly)
+    hit = shapely.intersects(poly, boxes)
+    mask[rc[hit, 0], rc[hit, 1]] = True
+    return mask
+
+
+def grid_from_walls(
+    size_m: tuple[float, float],
+    resolution_m: float,
+    walls: list[Polygon],
+    origin: tuple[float, float] = (0.0, 0.0),
+) -> OccupancyGrid:
+    """An occupancy grid of the given size with polygon walls rasterized into it."""
+    w, h = size_m
+    if not (w > 0 and h > 0):
+        raise MapError(f"map.size_m must be positive (got {list(size_m)})")
+    if not resolution_m > 0:
+        raise MapError(f"map.resolution_m must be > 0 (got {resolution_m})")
+    shape = (int(round(h / resolution_m)), int(round(w / resolution_m)))
+    grid = OccupancyGrid(np.zeros(shape, dtype=bool), resolution_m, origin)
+    return grid.with_polygons(walls)
+
+
+def load_map_yaml(path: str | Path) -> OccupancyGrid:
+    """Load a ROS map_server map (YAML + PGM/PNG image), trinary mode.
+
+    Raises :class:`MapError` naming the key and value for a missing file or bad metadata.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MapError(f"map.yaml: file not found: {str(path)!r}")
+    try:
+        meta = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise MapError(f"map.yaml: {str(path)!r} is not valid YAML: {exc}") from exc
+    if not isinstance(meta, dict):
+        raise MapError(f"map.yaml: {str(path)!r} must be a mapping of map_server keys")
+    for key in ("image", "resolution", "origin"):
+        if key not in meta:
+            raise MapError(f"map.yaml: {str(path)!r} has no {key!r} key")
+    known = {"image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh", "mode"}
+    unknown_keys = sorted(set(meta) - known)
+    if unknown_keys:
+        raise MapError(f"map.yaml: unknown key(s) {unknown_keys} in {str(path)!r}")
+    mode = meta.get("mode", "trinary")
+    if mode != "trinary":
+        raise MapError(f"map.yaml: mode {mode!r} is not supported (only 'trinary')")
+    image_path = (path.parent / str(meta["image"])).resolve()
+    if not image_path.is_file():
+        raise MapError(f"map.yaml: image file not found: {str(image_path)!r}")
+    origin = meta["origin"]
+    if not (isinstance(origin, list) and len(origin) == 3):
+        raise MapError(f"map.yaml: origin must be [x, y, yaw] (got {origin!r})")
+    if abs(float(origin[2])) > 1e-9:
+        raise MapError(f"map.yaml: origin yaw must be 0 (got {origin[2]!r})")
+    try:
+        res = float(meta["resolution"])
+        negate = int(meta.get("negate", 0))
+        occ_t = float(meta.get("occupied_thresh", DEFAULT_OCCUPIED_THRESH))
+        free_t = float(meta.get("free_thresh", DEFAULT_FREE_THRESH))
+    except (TypeError, ValueError) as exc:
+        raise MapError(f"map.yaml: bad number in {str(path)!r}: {exc}") from exc
+    if not res > 0:
+        raise MapError(f"map.yaml: resolution must be > 0 (got {res})")
+    if not 0 <= free_t < occ_t <= 1:
+        raise MapError(
+            f"map.yaml: need 0 <= free_thresh < occupied_thresh <= 1 (got {free_t}, {occ_t})"
+        )
+    with Image.open(image_path) as img:
+        pixels = np.asarray(img.convert("L"), dtype=float)
+    p = pixels / 255.0 if negate else (255.0 - pixels) / 255.0
+    occupied = np.flipud(p > occ_t)
+    unknown = np.flipud((p >= free_t) & (p <= occ_t))
+    return OccupancyGrid(occupied, res, (float(origin[0]), float(origin[1])), unknown)
+
+
+def save_map_yaml(grid: OccupancyGrid, path: str | Path) -> Path:
+    """Write ``grid`` as a map_server YAML and a PGM image beside it; returns the YAML path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    img = np.full(grid.shape, PGM_FREE, dtype=np.uint8)
+    img[grid.unknown] = PGM_UNKNOWN
+    img[grid.occupied] = PGM_OCCUPIED
+    pgm = path.with_suffix(".pgm")
+    Image.fromarray(np.flipud(img)).save(pgm)
+    meta = {
+        "image": pgm.name,
+        "resolution": float(grid.resolution_m),
+        "origin": [float(grid.origin[0]), float(grid.origin[1]), 0.0],
+        "negate": 0,
+        "occupied_thresh": DEFAULT_OCCUPIED_THRESH,
+        "free_thresh": DEFAULT_FREE_THRESH,
+    }
+    path.write_text(yaml.safe_dump(meta, sort_keys=False))
+    return path
+
+
+def region_box(grid: OccupancyGrid) -> Polygon:
+    """The grid's extent as a polygon."""
+    return box(*grid.bounds)

@@ -1,0 +1,1 @@
+"""The world: scenario schema (pydantic), loading and validation with clear errors."""
