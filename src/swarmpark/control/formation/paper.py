@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmpark.control.formation.planner import (
+from swarmpark.control.formation import (
     METHODS,
     FormationPlan,
     FormationProblem,
