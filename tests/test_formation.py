@@ -27,8 +27,8 @@ from swarmpark.control.formation.paper import (
     experiment_problem,
     paper_problem,
     run_obstacle_experiment,
-    run_paper,
 )
+from swarmpark.control.formation.paper_report import run_paper
 from swarmpark.core.paths import SplinePath
 
 TOL_V = 1e-9  # speeds are clipped to their bounds after the solve

@@ -11,13 +11,13 @@ from shapely.geometry import box
 
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import OccupancyGrid, grid_from_walls, load_map_yaml, save_map_yaml
+from swarmpark.sense.agreement import map_agreement
 from swarmpark.sense.amcl import LikelihoodField, ParticleFilter
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.mapping import (
     GridMapper,
     MapperConfig,
     compose,
-    map_agreement,
     relative_pose,
 )
 from swarmpark.sim.odometry import OdometryDrift
