@@ -545,8 +545,8 @@ class Supervisor:
     def _start_localization(self) -> None:
         """Per-skid AMCL on simulated scans and drifting odometry (2018 paper Sect. 3.5)."""
         from swarmpark.core.geometry import pad_polygons, triangulate
+        from swarmpark.sense.amcl import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
         from swarmpark.sense.lidar import LidarSpec, prepare_grid
-        from swarmpark.sense.localize import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
 
         cfg = self.world.scenario.sensing
         self.lidar_spec = LidarSpec(
