@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmpark.core.limits import MAX_ROBOTS_PER_COMMAND
+
 __all__ = ["layout_command", "build_parser"]
 
 EXIT_OK, EXIT_BAD_INPUT = 0, 2
@@ -85,6 +87,23 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_png_path(path: str) -> None:
+    """Refuse a drawing path whose folder does not exist or whose extension matplotlib
+    cannot write, before any work is done."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise _BadInput(f"--png: folder {str(target.parent)!r} does not exist")
+    ext = target.suffix.lower().lstrip(".")
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if ext not in formats:
+        raise _BadInput(
+            f"--png: cannot write {ext or 'a file without extension'!r} "
+            f"(use one of {', '.join(sorted(formats))}): {path!r}"
+        )
+
+
 def _json_arg(text: str, option: str):
     try:
         return json.loads(text)
@@ -125,6 +144,8 @@ def _footprints(args):
         raise _BadInput("--count: required with --footprint (or use --capacity)")
     if args.count < 1:
         raise _BadInput(f"--count: must be >= 1 (got {args.count})")
+    if args.count > MAX_ROBOTS_PER_COMMAND:
+        raise _BadInput(f"--count: at most {MAX_ROBOTS_PER_COMMAND} skids (got {args.count})")
     return [fp] * args.count
 
 
@@ -282,7 +303,6 @@ def _draw(path: str, panels, boundary, obstacles, footprints) -> Path:
         ax.tick_params(labelsize=7)
     fig.tight_layout()
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
@@ -298,6 +318,8 @@ def layout_command(argv: list[str]) -> int:
     try:
         if not math.isfinite(args.margin_m):
             raise _BadInput(f"--margin-m: must be finite (got {args.margin_m})")
+        if args.png:
+            _check_png_path(args.png)
         boundary = _json_arg(args.boundary, "--boundary")
         footprints = _footprints(args)
         obstacles = _obstacles(args, boundary)
