@@ -82,6 +82,10 @@ class Registry(Generic[T]):
 
         return deco
 
+    def remove(self, name: str) -> T:
+        """Unregister ``name`` (a plugin unloaded, a test cleaning up); returns its item."""
+        return self._entries.pop(self.check(name)).item
+
     def names(self) -> tuple[str, ...]:
         return tuple(self._entries)
 
