@@ -118,7 +118,8 @@ def _solve(region: Region, skids: Skids, method: str) -> tuple[np.ndarray, dict]
 
 
 def _finish_checked(boundary_world, region, skids, centres, method, info, opening):
-    """:func:`_finish`, falling back to stacking when a convex solution fails validation.
+    """:func:`_finish`, falling back to the method's ``fallback`` (convex: stacking) when its
+    solution fails validation.
 
     The convex program keeps its constraints only within solver tolerance, and on some
     non-convex boundaries (split into pieces) a footprint can end up outside by more than the
@@ -128,13 +129,14 @@ def _finish_checked(boundary_world, region, skids, centres, method, info, openin
     try:
         return _finish(boundary_world, region, skids, centres, method, info, opening)
     except LayoutError as exc:
-        if method != "convex" or exc.fits is not None:
+        other = get_method(method).fallback
+        if other is None or exc.fits is not None:
             raise
-        centres, fallback = _solve(region, skids, "stacking")
-        fallback["notices"] = [f"convex: {exc}; used the stacking layout instead"] + fallback.get(
+        centres, fallback = _solve(region, skids, other)
+        fallback["notices"] = [f"{method}: {exc}; used the {other} layout instead"] + fallback.get(
             "notices", []
         )
-        return _finish(boundary_world, region, skids, centres, "stacking", fallback, opening)
+        return _finish(boundary_world, region, skids, centres, other, fallback, opening)
 
 
 def _finish(
@@ -224,7 +226,8 @@ def layout(
         :func:`candidate_headings`) with the most room, measured by how many of the largest
         footprint fit by stacking (ties: first candidate, so 0 wins over 90 deg).
     method
-        ``"stacking"``, ``"potential"`` or ``"convex"``.
+        A name registered in :data:`~swarmpark.layout.methods.LAYOUT_METHODS`:
+        ``"stacking"``, ``"potential"`` or ``"convex"`` (or one registered later).
     margin_m
         Clearance between skids and from skids to the boundary, walls and obstacles.
     obstacles
@@ -253,7 +256,7 @@ def layout(
     >>> res.report["min_spacing_m"]
     0.25
     """
-    get_method(method)
+    get_method(method)  # an unknown name is refused before any work
     h = _parse_heading(heading)
     skids = make_skids(footprints)
     if h is not None:

@@ -44,6 +44,8 @@ class LayoutMethod:
 
     name: ClassVar[str]
     description: ClassVar[str]
+    #: Method whose layout is used (with a notice) when this one's fails validation.
+    fallback: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -159,6 +161,8 @@ class Convex(LayoutMethod):
     description = (
         "Convex optimization (2015 Sect. 3.1): max-min spacing floor plan, structured optimization"
     )
+    #: The LP holds its rows only within solver tolerance (see ``api._finish_checked``).
+    fallback = "stacking"
 
     @classmethod
     def solve(cls, region, skids):

@@ -52,9 +52,9 @@ class _Strict(BaseModel):
 class ParkRequest(ParkCmd):
     """Park ``robots`` inside ``boundary`` (``[[x, y], ...]``, metres, at least 3 vertices).
 
-    ``heading_deg`` is the parked yaw in degrees (or ``"auto"``), ``method`` one of
-    ``stacking``, ``potential``, ``convex``; ``margin_m`` the clearance between skids and to
-    the boundary; ``assignment`` the robot-to-goal cost.
+    ``heading_deg`` is the parked yaw in degrees (or ``"auto"``), ``method`` a layout method
+    and ``assignment`` a robot-to-goal cost, both as listed by ``GET /api/meta`` (from their
+    registries); ``margin_m`` the clearance between skids and to the boundary.
     """
 
     @field_validator("robots")

@@ -859,7 +859,7 @@ async function loadWorld(rev) {
   if (!r.ok) return;
   const first = !S.world || S.world.file !== r.data.file;
   S.world = r.data;
-  loadMeta();  // (the number of skids a park may take is the scenario's)
+  loadMeta();  // refreshed with every scenario (robots_per_park is the fleet size)
   const img = new Image();
   img.onload = () => { S.dirty = true; };
   img.src = "/api/map?rev=" + S.world.rev;
