@@ -52,11 +52,13 @@ class _BadInput(Exception):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from swarmpark.layout import METHODS
+    from swarmpark.layout import LAYOUT_METHODS
 
     p = _Parser(
         prog="swarmpark layout",
-        description="Parking goals for skids inside a boundary (stacking, potential, convex).",
+        description="Parking goals for skids inside a boundary ("
+        + ", ".join(LAYOUT_METHODS.names())
+        + ").",
     )
     p.add_argument("--boundary", required=True, metavar="JSON", help="'[[x, y], ...]' metres")
     p.add_argument("--count", type=int, metavar="N", help="number of skids (with --footprint)")
@@ -74,7 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="JSON",
         help="mixed sizes instead of --count/--footprint: '[[L, W], [L, W, pivot], ...]'",
     )
-    p.add_argument("--method", choices=METHODS, help="layout method (default stacking)")
+    p.add_argument(
+        "--method",
+        choices=LAYOUT_METHODS.names(),
+        help="layout method (default stacking): "
+        + "; ".join(f"{e.name}: {e.description}" for e in LAYOUT_METHODS.entries()),
+    )
     p.add_argument("--heading-deg", default="0", metavar="D|auto", help="skid heading (deg)")
     p.add_argument("--margin-m", type=float, default=0.3, metavar="M", help="safety margin")
     p.add_argument("--map", metavar="FILE", help="map_server YAML; occupied cells are obstacles")
@@ -82,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--capacity", action="store_true", help="how many of the footprint fit")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument(
-        "--png", metavar="FILE", help="draw the layout (all three methods if --method is not set)"
+        "--png", metavar="FILE", help="draw the layout (every method if --method is not set)"
     )
     return p
 
@@ -312,7 +319,7 @@ def layout_command(argv: list[str]) -> int:
     """Run ``swarmpark layout`` with ``argv`` (without the word ``layout``); exit code."""
     from swarmpark.core.geometry import GeometryError
     from swarmpark.core.gridmap import MapError
-    from swarmpark.layout import METHODS, LayoutError
+    from swarmpark.layout import LAYOUT_METHODS, LayoutError
 
     args = build_parser().parse_args(argv)
     try:
@@ -327,7 +334,7 @@ def layout_command(argv: list[str]) -> int:
         res, seconds = _run(args, footprints, method, boundary, obstacles)
         panels = []
         if args.png:
-            for m in [args.method] if args.method else list(METHODS):
+            for m in [args.method] if args.method else list(LAYOUT_METHODS.names()):
                 if m == method:
                     r, s, err = res, seconds, None
                 else:
