@@ -185,7 +185,7 @@ class Player:
         res = self.rec.result or {}
         end = t >= self.rec.duration_s - 1e-9
         return {
-            "success": res.get("success") if end else None,
+            "success": res.get("success") if end else "-",
             "parked": int(np.sum(states == self._parked)),
             "commanded": sum(g is not None for g in goals),
             "time_to_park_s": res.get("time_to_park_s") if end else None,

@@ -33,6 +33,11 @@
   bar.append(play, slider, label, speed);
   document.getElementById("view").appendChild(bar);
   const badge = document.getElementById("conn");
+  // app.js disables every input of a read-only viewer; the timeline is not a command.
+  const keepEnabled = new MutationObserver(() => {
+    for (const c of [play, slider, speed]) if (c.disabled) c.disabled = false;
+  });
+  for (const c of [play, slider, speed]) keepEnabled.observe(c, { attributes: true, attributeFilter: ["disabled"] });
 
   async function control(body) {
     const res = await fetch("/api/replay", {
