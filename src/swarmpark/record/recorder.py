@@ -42,6 +42,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from swarmpark.record import messages as m
+from swarmpark.record.audit import AlarmTracker
 from swarmpark.record.sinks import Sink
 
 __all__ = ["Recorder", "RecordConfig", "TOPICS"]
@@ -62,6 +63,8 @@ TOPICS = {
     "/swarmpark/operator": "string",
     "/swarmpark/alarms": "string",
 }
+#: Topics written once or on change, which a late viewer needs again (ROS "latched").
+LATCHED = ("/map", "/world", "/tf_static", "/goals", "/boundary", "/paths")
 NS = 1_000_000_000
 #: Decimal places of the path points (cm) and of drawn lines.
 LINE_DEC = 2
@@ -160,6 +163,15 @@ class Recorder:
         for s, cid in zip(self.sinks, ids, strict=True):
             s.write(cid, t_ns, data)
         self.messages += 1
+        if topic in LATCHED:
+            self._latched[topic] = (t_ns, data)
+
+    def republish(self, sink: Sink) -> None:
+        """Send ``sink`` the last message of each latched topic (the map, the walls, goals,
+        boundaries, paths): a viewer that subscribes late still sees them."""
+        k = self.sinks.index(sink)
+        for topic, (t_ns, data) in self._latched.items():
+            sink.write(self._ch[topic][0][k], t_ns, data)
 
     def _json(self, topic: str, t_ns: int, obj) -> None:
         self._put(topic, t_ns, m.json_string(obj))
@@ -172,12 +184,11 @@ class Recorder:
 
         self.sup = sup
         self._ch: dict[str, tuple[list[int], str]] = {}
+        self._latched: dict[str, tuple[int, bytes]] = {}
         self._pose_due = _Every(self.config.rate_hz)
         self._scan_due = _Every(self.config.scan_rate_hz)
         self._n_out = 0
-        self._n_coll = 0
-        self._n_dead = 0
-        self._estop = False
+        self._alarm_tracker = AlarmTracker()
         self._goals_key = None
         self._groups_key = None
         self._n_groups = 0
@@ -369,16 +380,8 @@ class Recorder:
         self._n_out = len(outs)
 
     def _alarms(self, sup, t_ns: int) -> None:
-        met = sup.metrics
-        for c in met.collisions[self._n_coll :]:
-            self.on_alarm({"kind": "collision", **c}, t_ns)
-        self._n_coll = len(met.collisions)
-        for d in met.deadlocks[self._n_dead :]:
-            self.on_alarm({"kind": "deadlock", **d.as_dict()}, t_ns)
-        self._n_dead = len(met.deadlocks)
-        if bool(sup.estopped) != self._estop:
-            self._estop = bool(sup.estopped)
-            self.on_alarm({"kind": "estop", "latched": self._estop}, t_ns)
+        for a in self._alarm_tracker.new(sup):
+            self.on_alarm(a, t_ns)
 
     def on_command(self, entry: dict) -> None:
         """An operator request as the server saw it (client, token, answer): the audit."""

@@ -95,7 +95,18 @@ class FoxgloveSink:
 
         self._foxglove = foxglove
         self._ctx = foxglove.Context()
-        self.server = foxglove.start_server(name=name, host=host, port=port, context=self._ctx)
+        #: Set (from the server's thread) when a client subscribes: the recorder then
+        #: re-sends the latched topics (a plain bool: reading it needs no lock).
+        self.subscribed = False
+        sink = self
+
+        class _Listener(foxglove.ServerListener):
+            def on_subscribe(self, client, channel) -> None:
+                sink.subscribed = True
+
+        self.server = foxglove.start_server(
+            name=name, host=host, port=port, context=self._ctx, server_listener=_Listener()
+        )
         self.port = self.server.port
         self._channels: list = []
         self._by_topic: dict[str, int] = {}

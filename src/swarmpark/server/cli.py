@@ -52,6 +52,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-script", action="store_true", help="ignore the scenario's own timed commands"
     )
+    p.add_argument(
+        "--record", metavar="DIR", help="record every run as MCAP (ROS 2 types) into DIR"
+    )
+    p.add_argument(
+        "--foxglove", nargs="?", type=int, const=8765, metavar="PORT",
+        help="stream the recorded channels to Foxglove (WebSocket, default port 8765)",
+    )  # fmt: skip
+    p.add_argument(
+        "--foxglove-host", default="127.0.0.1",
+        help="address the Foxglove server binds (default 127.0.0.1)",
+    )  # fmt: skip
+    p.add_argument(
+        "--audit", metavar="FILE",
+        help="operator audit log, JSON lines, rotated (default: DIR/audit.jsonl with --record, "
+        "else ~/.local/state/swarmpark/audit.jsonl)",
+    )  # fmt: skip
+    p.add_argument(
+        "--record-rate",
+        type=float,
+        default=10.0,
+        metavar="HZ",
+        help="pose samples per simulated second",
+    )
+    p.add_argument(
+        "--scan-rate", type=float, default=5.0, metavar="HZ", help="scans per simulated second"
+    )
     return p
 
 
@@ -67,6 +93,48 @@ def _check(args) -> None:
         )
     if args.token is not None and not args.token.strip():
         raise _BadInput("swarmpark serve: error: --token must not be empty")
+    if args.foxglove is not None and not 0 <= args.foxglove < 65536:
+        raise _BadInput(
+            f"swarmpark serve: error: --foxglove must be 0..65535 (got {args.foxglove})"
+        )
+    for name in ("record_rate", "scan_rate"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v > 0):
+            flag = "--" + name.replace("_", "-")
+            raise _BadInput(f"swarmpark serve: error: {flag} must be > 0 Hz (got {v})")
+
+
+def _observers(args) -> list:
+    """The audit log (always: nothing is kept only in memory), the recorder, Foxglove."""
+    from pathlib import Path
+
+    from swarmpark.record.audit import AuditLog, default_audit_path
+    from swarmpark.record.live import LiveRecording
+    from swarmpark.record.recorder import RecordConfig
+
+    if args.audit:
+        audit_path = Path(args.audit)
+    elif args.record:
+        audit_path = Path(args.record) / "audit.jsonl"
+    else:
+        audit_path = default_audit_path()
+    observers: list = [AuditLog(audit_path)]
+    sys.stderr.write(f"swarmpark serve: audit log {audit_path}\n")
+    if args.record or args.foxglove is not None:
+        live = LiveRecording(
+            directory=args.record,
+            foxglove_port=args.foxglove,
+            foxglove_host=args.foxglove_host,
+            config=RecordConfig(rate_hz=args.record_rate, scan_rate_hz=args.scan_rate),
+        )
+        observers.append(live)
+        if args.record:
+            sys.stderr.write(f"swarmpark serve: recording into {args.record}/\n")
+        if live.foxglove_port is not None:
+            sys.stderr.write(
+                f"swarmpark serve: Foxglove on ws://{args.foxglove_host}:{live.foxglove_port}\n"
+            )
+    return observers
 
 
 def _is_loopback(host: str) -> bool:
@@ -89,14 +157,24 @@ def serve_command(argv: list[str]) -> int:
         except SystemExit as exc:  # -h / --help printed the usage
             return int(exc.code or 0)
         _check(args)
-        app = create_app(
-            args.scenario,
-            token=args.token,
-            scenarios_dir=args.scenarios_dir,
-            speed=args.speed,
-            autostart=not args.paused,
-            scripted=not args.no_script,
-        )
+        try:
+            observers = _observers(args)
+        except OSError as exc:  # a directory that cannot be made, a port in use
+            raise _BadInput(f"swarmpark serve: error: --record/--audit/--foxglove: {exc}") from None
+        try:
+            app = create_app(
+                args.scenario,
+                token=args.token,
+                scenarios_dir=args.scenarios_dir,
+                speed=args.speed,
+                autostart=not args.paused,
+                scripted=not args.no_script,
+                observers=observers,
+            )
+        except BaseException:
+            for o in observers:
+                o.close()
+            raise
     except _BadInput as exc:
         sys.stderr.write(f"{exc}\n")
         return EXIT_BAD_INPUT
