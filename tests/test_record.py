@@ -189,3 +189,12 @@ def test_messages_round_trip():
     back = m.deserialize(m.serialize(msg, m.TYPES["scan"]), m.TYPES["scan"])
     assert back.angle_max == pytest.approx(0.0)
     assert back.ranges[0] == 1.0 and np.isinf(back.ranges[1:]).all()
+
+
+def test_foxglove_layout_in_docs_is_the_generated_one():
+    from swarmpark.record.foxglove_layout import fleet_layout
+
+    doc = json.loads((Path(__file__).parents[1] / "docs" / "foxglove-layout.json").read_text())
+    assert doc == fleet_layout([f"s{k}" for k in range(1, 7)])
+    assert doc["configById"]["3D!fleet"]["followTf"] == "map"
+    assert "/s3/scan" in doc["configById"]["3D!fleet"]["topics"]
