@@ -97,11 +97,13 @@ def read_channels(path: str | Path, topics: list[str] | None = None):
     except IsADirectoryError:
         raise RecordingError(f"{path}: is a directory, not an .mcap file") from None
     except Exception as exc:  # mcap raises many kinds for a damaged file
-        raise RecordingError(f"{path}: not a complete MCAP recording ({_why(exc)})") from None
+        raise RecordingError(f"{path}: not a complete MCAP recording, cut short or damaged ({_why(exc)})") from None
 
 
 def _why(exc: Exception) -> str:
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if len(text) > 80:
+        text = text[:77] + "..."
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
@@ -126,7 +128,7 @@ def _summary(path: Path) -> tuple[dict, dict[str, dict]]:
     except IsADirectoryError:
         raise RecordingError(f"{path}: is a directory, not an .mcap file") from None
     except Exception as exc:
-        raise RecordingError(f"{path}: not a complete MCAP recording ({_why(exc)})") from None
+        raise RecordingError(f"{path}: not a complete MCAP recording, cut short or damaged ({_why(exc)})") from None
     if header.profile != "ros2" or "swarmpark.world" not in meta:
         raise RecordingError(
             f"{path}: an MCAP file, but not a swarmpark recording "
