@@ -97,7 +97,9 @@ def read_channels(path: str | Path, topics: list[str] | None = None):
     except IsADirectoryError:
         raise RecordingError(f"{path}: is a directory, not an .mcap file") from None
     except Exception as exc:  # mcap raises many kinds for a damaged file
-        raise RecordingError(f"{path}: not a complete MCAP recording, cut short or damaged ({_why(exc)})") from None
+        raise RecordingError(
+            f"{path}: not a complete MCAP recording, cut short or damaged ({_why(exc)})"
+        ) from None
 
 
 def _why(exc: Exception) -> str:
@@ -128,7 +130,9 @@ def _summary(path: Path) -> tuple[dict, dict[str, dict]]:
     except IsADirectoryError:
         raise RecordingError(f"{path}: is a directory, not an .mcap file") from None
     except Exception as exc:
-        raise RecordingError(f"{path}: not a complete MCAP recording, cut short or damaged ({_why(exc)})") from None
+        raise RecordingError(
+            f"{path}: not a complete MCAP recording, cut short or damaged ({_why(exc)})"
+        ) from None
     if header.profile != "ros2" or "swarmpark.world" not in meta:
         raise RecordingError(
             f"{path}: an MCAP file, but not a swarmpark recording "
@@ -148,89 +152,108 @@ def _marker_groups(msg) -> list[dict]:
     return out
 
 
+def _yaw(o) -> float:
+    return float(m.quaternion_yaw(np.array([o.x, o.y, o.z, o.w])))
+
+
+class _Collector:
+    """Decoded messages sorted into the parts of a :class:`Recording`, one topic at a time."""
+
+    def __init__(self, ids: list[str]) -> None:
+        self.index = {rid: i for i, rid in enumerate(ids)}
+        self.n = len(ids)
+        self.odom: dict[float, np.ndarray] = {}
+        self.state_rows: dict[float, tuple[bool, list[int]]] = {}
+        self.people: list[tuple[float, np.ndarray]] = []
+        self.grid = None
+        self.parts: dict[str, list] = {
+            k: [] for k in ("goals", "groups", "paths", "commands", "operator", "alarms")
+        }
+        self.by_topic = {
+            "/swarmpark/state": self._state,
+            "/people": self._people,
+            "/goals": self._goals,
+            "/boundary": lambda t, msg: self.parts["groups"].append((t, _marker_groups(msg))),
+            "/paths": self._paths,
+            "/swarmpark/commands": lambda t, msg: self.parts["commands"].append(
+                json.loads(msg.data)
+            ),
+            "/swarmpark/operator": lambda t, msg: self.parts["operator"].append(
+                json.loads(msg.data)
+            ),
+            "/swarmpark/alarms": lambda t, msg: self.parts["alarms"].append(json.loads(msg.data)),
+            "/map": self._map,
+        }
+
+    def add(self, topic: str, t: float, msg) -> None:
+        if topic.endswith("/odom"):
+            self._odom(topic.split("/")[1], t, msg)
+        elif topic in self.by_topic:
+            self.by_topic[topic](t, msg)
+
+    def _odom(self, rid: str, t: float, msg) -> None:
+        row = self.odom.setdefault(t, np.full((self.n, 5), np.nan))
+        p, tw = msg.pose.pose, msg.twist.twist
+        row[self.index[rid]] = (
+            p.position.x, p.position.y, _yaw(p.orientation), tw.linear.x, tw.angular.z,
+        )  # fmt: skip
+
+    def _state(self, t: float, msg) -> None:
+        d = json.loads(msg.data)
+        self.state_rows[t] = (d["estop"], d["states"])
+
+    def _people(self, t: float, msg) -> None:
+        xy = np.array([[mk.pose.position.x, mk.pose.position.y] for mk in msg.markers])
+        self.people.append((t, xy))
+
+    def _goals(self, t: float, msg) -> None:
+        g = np.full((self.n, 3), np.nan)
+        for mk in msg.markers:
+            if mk.action != m.DELETE:
+                g[mk.id] = (mk.pose.position.x, mk.pose.position.y, _yaw(mk.pose.orientation))
+        self.parts["goals"].append((t, g))
+
+    def _paths(self, t: float, msg) -> None:
+        paths: list = [None] * self.n
+        for mk in msg.markers:
+            if mk.action != m.DELETE:
+                paths[mk.id] = [v for p in mk.points for v in (p.x, p.y)]
+        self.parts["paths"].append((t, paths))
+
+    def _map(self, t: float, msg) -> None:
+        if self.grid is None:
+            self.grid = msg
+
+
 def load_recording(path: str | Path) -> Recording:
     """Read a recording written by :class:`~swarmpark.record.recorder.Recorder`."""
     path = Path(path)
     meta, chans = _summary(path)
     world = json.loads(meta["swarmpark.world"]["json"])
-    run = meta.get("swarmpark.run", {})
     result = json.loads(meta["swarmpark.result"]["json"]) if "swarmpark.result" in meta else None
     ids = [r["id"] for r in world["robots"]]
-    index = {rid: i for i, rid in enumerate(ids)}
-    n = len(ids)
+    col = _Collector(ids)
     stamps: dict[str, list[float]] = {t: [] for t in chans}
-    odom: dict[float, np.ndarray] = {}
-    state_rows: dict[float, tuple[bool, list[int]]] = {}
-    people: list[tuple[float, np.ndarray]] = []
-    rec: dict = {
-        "goals": [],
-        "groups": [],
-        "paths": [],
-        "commands": [],
-        "operator": [],
-        "alarms": [],
-    }
-    grid = None
-    wanted = [t for t in chans if not t.endswith("/scan") and not t.endswith("/cmd_vel")]
-    for topic, _, t, msg in read_channels(path, wanted):
+    # Scans and twists are most of a file and not drawn: counted, not decoded.
+    bulky = [t for t in chans if t.endswith(("/scan", "/cmd_vel"))]
+    for topic, _, t, msg in read_channels(path, [t for t in chans if t not in bulky]):
         stamps[topic].append(t)
-        if topic.endswith("/odom"):
-            row = odom.setdefault(t, np.full((n, 5), np.nan))
-            p = msg.pose.pose
-            q = np.array([p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w])
-            row[index[topic.split("/")[1]]] = (
-                p.position.x, p.position.y, m.quaternion_yaw(q),
-                msg.twist.twist.linear.x, msg.twist.twist.angular.z,
-            )  # fmt: skip
-        elif topic == "/swarmpark/state":
-            d = json.loads(msg.data)
-            state_rows[t] = (d["estop"], d["states"])
-        elif topic == "/people":
-            people.append(
-                (t, np.array([[mk.pose.position.x, mk.pose.position.y] for mk in msg.markers]))
-            )
-        elif topic == "/goals":
-            g = np.full((n, 3), np.nan)
-            for mk in msg.markers:
-                if mk.action != m.DELETE:
-                    o = mk.pose.orientation
-                    g[mk.id] = (
-                        mk.pose.position.x,
-                        mk.pose.position.y,
-                        m.quaternion_yaw(np.array([o.x, o.y, o.z, o.w])),
-                    )
-            rec["goals"].append((t, g))
-        elif topic == "/boundary":
-            rec["groups"].append((t, _marker_groups(msg)))
-        elif topic == "/paths":
-            paths = [None] * n
-            for mk in msg.markers:
-                if mk.action != m.DELETE:
-                    paths[mk.id] = [v for p in mk.points for v in (p.x, p.y)]
-            rec["paths"].append((t, paths))
-        elif topic == "/swarmpark/commands":
-            rec["commands"].append(json.loads(msg.data))
-        elif topic == "/swarmpark/operator":
-            rec["operator"].append(json.loads(msg.data))
-        elif topic == "/swarmpark/alarms":
-            rec["alarms"].append(json.loads(msg.data))
-        elif topic == "/map" and grid is None:
-            grid = msg
-    if grid is None or not odom:
+        col.add(topic, t, msg)
+    grid = col.grid
+    if grid is None or not col.odom:
         raise RecordingError(f"{path}: a swarmpark recording without a map or poses")
-    for topic in chans:
-        if topic.endswith("/scan") or topic.endswith("/cmd_vel"):
-            stamps[topic] = [t for _, _, t, _ in _stamps_only(path, topic)]
-    times = np.array(sorted(odom))
-    rows = np.stack([odom[t] for t in times])
-    states = np.array([state_rows.get(t, (False, [0] * n))[1] for t in times], dtype=np.int64)
-    estop = np.array([state_rows.get(t, (False, None))[0] for t in times], dtype=bool)
+    for topic in bulky:
+        stamps[topic] = [t for _, _, t, _ in _stamps_only(path, topic)]
+    times = np.array(sorted(col.odom))
+    rows = np.stack([col.odom[t] for t in times])
+    none = (False, [0] * len(ids))
+    states = np.array([col.state_rows.get(t, none)[1] for t in times], dtype=np.int64)
+    estop = np.array([col.state_rows.get(t, none)[0] for t in times], dtype=bool)
     data = np.asarray(grid.data, np.int8).reshape(grid.info.height, grid.info.width)
-    pt = np.array([t for t, _ in people]) if people else np.zeros(0)
-    pxy = np.stack([xy for _, xy in people]) if people else np.zeros((0, 0, 2))
+    people = col.people
     return Recording(
         path=path,
-        run=run,
+        run=meta.get("swarmpark.run", {}),
         world=world,
         result=result,
         ids=ids,
@@ -243,11 +266,11 @@ def load_recording(path: str | Path) -> Recording:
         vel=rows[:, :, 3:],
         states=states,
         estop=estop,
-        people_times=pt,
-        people_xy=pxy,
+        people_times=np.array([t for t, _ in people]) if people else np.zeros(0),
+        people_xy=np.stack([xy for _, xy in people]) if people else np.zeros((0, 0, 2)),
         stamps={k: np.array(v) for k, v in stamps.items()},
         types=chans,
-        **rec,
+        **col.parts,
     )
 
 

@@ -18,7 +18,7 @@ import sys
 from collections import deque
 
 import numpy as np
-from fastapi import FastAPI, Query, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, FastAPI, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field
@@ -226,11 +226,112 @@ class ReplayControl(BaseModel):
     seek_s: float | None = Field(None, ge=0)
 
 
-def create_replay_app(rec: Recording, *, open_url: str | None = None):
+#: The replay's read-only API (the player is ``app.state.player``).
+router = APIRouter(prefix="/api")
+
+
+def _player(request: Request) -> Player:
+    return request.app.state.player
+
+
+@router.get("/world")
+async def world(request: Request):
+    return _player(request).world_info()
+
+
+@router.get("/map", response_class=Response)
+async def map_image(request: Request, rev: int | None = Query(None)):
+    return Response(_player(request).map_png(), media_type="image/png")
+
+
+@router.get("/auth")
+async def auth():
+    """Nobody holds control in a replay: the UI shows itself read-only."""
+    return {"token_required": False, "control": False}
+
+
+@router.get("/scenarios")
+async def scenarios(request: Request):
+    path = _player(request).rec.path
+    return {"directory": str(path.parent), "current": path.name, "scenarios": [path.name]}
+
+
+@router.get("/state")
+async def state(request: Request):
+    return _player(request).frame()
+
+
+@router.get("/replay")
+async def replay_status(request: Request):
+    return _player(request).status()
+
+
+@router.post("/replay")
+async def replay_control(req: ReplayControl, request: Request):
+    player = _player(request)
+    if req.seek_s is not None:
+        player.seek(req.seek_s)
+    if req.speed is not None:
+        player.speed = req.speed
+    if req.playing is not None:
+        if req.playing and player.t >= player.rec.duration_s - 1e-9:
+            player.seek(0.0)  # play again from the start
+        player.playing = req.playing
+    player.dirty = True
+    return player.status()
+
+
+@router.get("/recording")
+async def recording(request: Request):
+    """What the file holds: channels with their types and message counts, metadata."""
+    rec = _player(request).rec
+    return {
+        "file": rec.path.name,
+        "run": rec.run,
+        "result": rec.result,
+        "channels": {t: {"type": rec.types[t], "messages": len(s)} for t, s in rec.stamps.items()},
+        "operator": rec.operator,
+        "alarms": rec.alarms,
+    }
+
+
+@router.websocket("/ws")
+async def stream(ws: WebSocket):
+    """Frames in the live format: one at once, then while playing or after a seek."""
+    from swarmpark.server.engine import Client
+
+    player: Player = ws.app.state.player
+    await ws.accept()
+    client = Client()
+    player.clients.add(client)
+    await ws.send_text(json.dumps(player.frame(), separators=(",", ":")))
+    client.needs_full = False
+
+    async def sender():
+        while True:
+            await ws.send_text(await client.queue.get())
+
+    async def receiver():
+        with contextlib.suppress(WebSocketDisconnect):
+            while True:
+                await ws.receive_text()
+
+    tasks = [asyncio.ensure_future(sender()), asyncio.ensure_future(receiver())]
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        player.clients.discard(client)
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError):
+                await t
+
+
+def create_replay_app(rec: Recording, *, open_url: str | None = None) -> FastAPI:
     """The replay server for one recording (see the module docstring); ``open_url`` is
     opened in the user's browser once the server is up."""
     from swarmpark.server.app import STATIC_DIR
-    from swarmpark.server.engine import Client
 
     player = Player(rec)
 
@@ -261,89 +362,7 @@ def create_replay_app(rec: Recording, *, open_url: str | None = None):
     async def index():
         return HTMLResponse(page, headers={"Cache-Control": "no-cache"})
 
-    @app.get("/api/world")
-    async def world():
-        return player.world_info()
-
-    @app.get("/api/map", response_class=Response)
-    async def map_image(rev: int | None = Query(None)):
-        return Response(player.map_png(), media_type="image/png")
-
-    @app.get("/api/auth")
-    async def auth():
-        return {"token_required": False, "control": False}
-
-    @app.get("/api/scenarios")
-    async def scenarios():
-        return {
-            "directory": str(rec.path.parent),
-            "current": rec.path.name,
-            "scenarios": [rec.path.name],
-        }
-
-    @app.get("/api/state")
-    async def state():
-        return player.frame()
-
-    @app.get("/api/replay")
-    async def replay_status():
-        return player.status()
-
-    @app.post("/api/replay")
-    async def replay_control(req: ReplayControl):
-        if req.seek_s is not None:
-            player.seek(req.seek_s)
-        if req.speed is not None:
-            player.speed = req.speed
-        if req.playing is not None:
-            if req.playing and player.t >= rec.duration_s - 1e-9:
-                player.seek(0.0)  # play again from the start
-            player.playing = req.playing
-        player.dirty = True
-        return player.status()
-
-    @app.get("/api/recording")
-    async def recording():
-        """What the file holds: channels with their types and message counts, metadata."""
-        return {
-            "file": rec.path.name,
-            "run": rec.run,
-            "result": rec.result,
-            "channels": {
-                t: {"type": rec.types[t], "messages": len(s)} for t, s in rec.stamps.items()
-            },
-            "operator": rec.operator,
-            "alarms": rec.alarms,
-        }
-
-    @app.websocket("/api/ws")
-    async def stream(ws: WebSocket):
-        await ws.accept()
-        client = Client()
-        player.clients.add(client)
-        await ws.send_text(json.dumps(player.frame(), separators=(",", ":")))
-        client.needs_full = False
-
-        async def sender():
-            while True:
-                await ws.send_text(await client.queue.get())
-
-        async def receiver():
-            with contextlib.suppress(WebSocketDisconnect):
-                while True:
-                    await ws.receive_text()
-
-        tasks = [asyncio.ensure_future(sender()), asyncio.ensure_future(receiver())]
-        try:
-            await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-        finally:
-            player.clients.discard(client)
-            for t in tasks:
-                t.cancel()
-            for t in tasks:
-                with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError):
-                    await t
-
+    app.include_router(router)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     return app
 
