@@ -198,3 +198,23 @@ def test_foxglove_layout_in_docs_is_the_generated_one():
     assert doc == fleet_layout([f"s{k}" for k in range(1, 7)])
     assert doc["configById"]["3D!fleet"]["followTf"] == "map"
     assert "/s3/scan" in doc["configById"]["3D!fleet"]["topics"]
+
+
+def test_recording_does_not_change_the_run(tmp_path):
+    """The recorder only reads (its taps keep references): same result with and without."""
+    from swarmpark.apps.run import run_world
+    from swarmpark.record import RecordConfig, Recorder
+    from swarmpark.record.sinks import McapSink
+    from swarmpark.world.scenario import build_world, load_scenario
+
+    def result(observers):
+        out = run_world(build_world(load_scenario(SCENARIO)), observers=observers)
+        r = dict(out.result)
+        r.pop("tick_ms")
+        return r, out.poses
+
+    plain, poses = result([])
+    every_tick = RecordConfig(rate_hz=None, scan_rate_hz=None)
+    recorded, poses_rec = result([Recorder([McapSink(tmp_path / "r.mcap")], every_tick)])
+    assert recorded == plain
+    np.testing.assert_array_equal(poses_rec, poses)

@@ -169,3 +169,23 @@ def test_serve_cli_rejects_bad_record_options(tmp_path, capsys):
     assert "--foxglove must be 0..65535" in capsys.readouterr().err
     assert serve_command([str(DATA / "ui-small.yaml"), "--record-rate", "0"]) == 2
     assert "--record-rate must be > 0" in capsys.readouterr().err
+
+
+def test_serve_foxglove_port_in_use_is_one_line(capsys):
+    from swarmpark.server.cli import serve_command
+
+    live = LiveRecording(foxglove_port=0)
+    try:
+        rc = serve_command(
+            [
+                str(DATA / "ui-small.yaml"),
+                "--foxglove",
+                str(live.foxglove_port),
+                "--audit",
+                "/dev/null",
+            ]
+        )
+    finally:
+        live.close()
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "--foxglove" in err and "in use" in err

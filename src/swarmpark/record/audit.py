@@ -69,23 +69,32 @@ class AuditLog:
 
     def __init__(self, path: str | Path, *, max_bytes: int = MAX_BYTES, backups: int = BACKUPS):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._rotate = (max_bytes, backups)
+        self._handler: logging.handlers.RotatingFileHandler | None = None
         # A logger of our own (not propagated): the application's logging setup is untouched.
         self._log = logging.getLogger(f"swarmpark.audit.{id(self)}")
         self._log.propagate = False
         self._log.setLevel(logging.INFO)
-        self._handler = logging.handlers.RotatingFileHandler(
-            self.path, maxBytes=max_bytes, backupCount=backups, encoding="utf-8"
-        )
-        self._handler.setFormatter(logging.Formatter("%(message)s"))
-        self._log.addHandler(self._handler)
         self._alarms = AlarmTracker()
         self.sup = None
         self.scenario = None
 
+    def _open(self) -> logging.Handler:
+        """The file is made at the first entry (a server that fails to start leaves none)."""
+        if self._handler is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            max_bytes, backups = self._rotate
+            self._handler = logging.handlers.RotatingFileHandler(
+                self.path, maxBytes=max_bytes, backupCount=backups, encoding="utf-8"
+            )
+            self._handler.setFormatter(logging.Formatter("%(message)s"))
+            self._log.addHandler(self._handler)
+        return self._handler
+
     def write(self, entry: dict) -> None:
+        handler = self._open()
         self._log.info(json.dumps(entry, separators=(",", ":"), default=str))
-        self._handler.flush()
+        handler.flush()
 
     # ------------------------------------------------------------------ observer
 
@@ -114,8 +123,10 @@ class AuditLog:
         )
 
     def close(self) -> None:
-        self._log.removeHandler(self._handler)
-        self._handler.close()
+        if self._handler is not None:
+            self._log.removeHandler(self._handler)
+            self._handler.close()
+            self._handler = None
 
 
 class AuditMiddleware:

@@ -45,8 +45,6 @@ class LiveRecording:
         if directory is None and foxglove_port is None:
             raise ValueError("LiveRecording: give a directory, a Foxglove port, or both")
         self.directory = Path(directory) if directory is not None else None
-        if self.directory is not None:
-            self.directory.mkdir(parents=True, exist_ok=True)
         self.config = config or RecordConfig()
         self.fox = (
             FoxgloveSink(host=foxglove_host, port=foxglove_port)

@@ -181,8 +181,10 @@ class Recorder:
     def on_start(self, sup) -> None:
         """Declare the channels and write what does not change (map, walls, metadata)."""
         from swarmpark.server.frames import jsonable, world_info
+        from swarmpark.supervisor.core import ROBOT_STATES
 
         self.sup = sup
+        self._state_code = {s: k for k, s in enumerate(ROBOT_STATES)}
         self._ch: dict[str, tuple[list[int], str]] = {}
         self._latched: dict[str, tuple[int, bytes]] = {}
         self._pose_due = _Every(self.config.rate_hz)
@@ -294,9 +296,7 @@ class Recorder:
             xy = sim.person_positions()
             pid = [p.id for p in sim.people]
             self._put("/people", t_ns, m.people_markers(t_ns, pid, xy, sim.person_radius))
-        from swarmpark.supervisor.core import ROBOT_STATES
-
-        code = {s: k for k, s in enumerate(ROBOT_STATES)}
+        code = self._state_code
         self._json(
             "/swarmpark/state",
             t_ns,

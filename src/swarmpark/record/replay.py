@@ -18,7 +18,15 @@ import sys
 from collections import deque
 
 import numpy as np
-from fastapi import APIRouter, FastAPI, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi import (
+    APIRouter,
+    FastAPI,
+    HTTPException,
+    Query,
+    Request,
+    WebSocket,
+    WebSocketDisconnect,
+)
 from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field
@@ -248,6 +256,17 @@ async def map_image(request: Request, rev: int | None = Query(None)):
 async def auth():
     """Nobody holds control in a replay: the UI shows itself read-only."""
     return {"token_required": False, "control": False}
+
+
+@router.get("/meta")
+async def meta(request: Request):
+    """The live UI's choices and limits, from the live server's ``GET /api/meta`` where this
+    version has one (the UI reads it when it loads; a replay commands nothing)."""
+    try:
+        from swarmpark.server.routers.meta import meta as live_meta
+    except ImportError:
+        raise HTTPException(404, "this version has no /api/meta") from None
+    return live_meta(len(_player(request).rec.ids))
 
 
 @router.get("/scenarios")

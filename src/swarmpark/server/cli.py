@@ -104,8 +104,9 @@ def _check(args) -> None:
             raise _BadInput(f"swarmpark serve: error: {flag} must be > 0 Hz (got {v})")
 
 
-def _observers(args) -> list:
-    """The audit log (always: nothing is kept only in memory), the recorder, Foxglove."""
+def _observers(args) -> tuple[list, list[str]]:
+    """The audit log (always: nothing is kept only in memory), the recorder, Foxglove; and
+    the lines that tell the operator where they are (printed once the server starts)."""
     from pathlib import Path
 
     from swarmpark.record.audit import AuditLog, default_audit_path
@@ -119,7 +120,7 @@ def _observers(args) -> list:
     else:
         audit_path = default_audit_path()
     observers: list = [AuditLog(audit_path)]
-    sys.stderr.write(f"swarmpark serve: audit log {audit_path}\n")
+    notes = [f"audit log {audit_path}"]
     if args.record or args.foxglove is not None:
         live = LiveRecording(
             directory=args.record,
@@ -129,12 +130,10 @@ def _observers(args) -> list:
         )
         observers.append(live)
         if args.record:
-            sys.stderr.write(f"swarmpark serve: recording into {args.record}/\n")
+            notes.append(f"recording into {args.record}/")
         if live.foxglove_port is not None:
-            sys.stderr.write(
-                f"swarmpark serve: Foxglove on ws://{args.foxglove_host}:{live.foxglove_port}\n"
-            )
-    return observers
+            notes.append(f"Foxglove on ws://{args.foxglove_host}:{live.foxglove_port}")
+    return observers, notes
 
 
 def _is_loopback(host: str) -> bool:
@@ -158,8 +157,8 @@ def serve_command(argv: list[str]) -> int:
             return int(exc.code or 0)
         _check(args)
         try:
-            observers = _observers(args)
-        except OSError as exc:  # a directory that cannot be made, a port in use
+            observers, notes = _observers(args)
+        except (OSError, RuntimeError) as exc:  # the Foxglove port in use (FoxgloveError)
             raise _BadInput(f"swarmpark serve: error: --record/--audit/--foxglove: {exc}") from None
         try:
             app = create_app(
@@ -178,7 +177,7 @@ def serve_command(argv: list[str]) -> int:
     except _BadInput as exc:
         sys.stderr.write(f"{exc}\n")
         return EXIT_BAD_INPUT
-    except (ScenarioError, FileNotFoundError, ValueError) as exc:
+    except (ScenarioError, OSError, ValueError) as exc:  # OSError: the record dir, the audit file
         sys.stderr.write(f"swarmpark serve: error: {exc}\n")
         return EXIT_BAD_INPUT
     import uvicorn
@@ -188,6 +187,8 @@ def serve_command(argv: list[str]) -> int:
             f"swarmpark serve: warning: listening on {args.host} without --token: "
             "anyone on the network can command the swarm\n"
         )
+    for note in notes:
+        sys.stderr.write(f"swarmpark serve: {note}\n")
     shown = f"[{args.host}]" if ":" in args.host else args.host
     sys.stderr.write(f"swarmpark serve: operator interface on http://{shown}:{args.port}/\n")
     try:
