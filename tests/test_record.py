@@ -218,3 +218,54 @@ def test_recording_does_not_change_the_run(tmp_path):
     recorded, poses_rec = result([Recorder([McapSink(tmp_path / "r.mcap")], every_tick)])
     assert recorded == plain
     np.testing.assert_array_equal(poses_rec, poses)
+
+
+class _ListSink:
+    """A sink that keeps (topic, t_ns) of what it is given; ``on`` says if anyone reads."""
+
+    def __init__(self) -> None:
+        self.topics: list[str] = []
+        self.got: list[tuple[str, int]] = []
+        self.on = False
+        self.closed = False
+
+    def channel(self, topic, typename):
+        self.topics.append(topic)
+        return len(self.topics) - 1
+
+    def write(self, channel, t_ns, data):
+        self.got.append((self.topics[channel], t_ns))
+
+    def metadata(self, name, data):
+        pass
+
+    def active(self):
+        return self.on
+
+    def close(self):
+        self.closed = True
+
+
+def test_no_samples_while_nobody_reads_but_commands_and_latched_topics():
+    from swarmpark.record import Recorder
+    from swarmpark.supervisor.core import Supervisor
+    from swarmpark.world.scenario import build_world, load_scenario
+
+    sup = Supervisor(build_world(load_scenario(SCENARIO)))
+    sink = _ListSink()
+    rec = Recorder([sink], owned=[])
+    rec.on_start(sup)
+    for _ in range(12):  # past the park command at 0.5 s
+        sup.tick()
+        rec.on_tick(sup)
+    topics = {t for t, _ in sink.got}
+    assert {"/map", "/world", "/goals", "/swarmpark/commands"} <= topics
+    assert not topics & {"/tf", "/s1/odom", "/s1/scan", "/footprints"}
+    sink.on = True
+    for _ in range(4):
+        sup.tick()
+        rec.on_tick(sup)
+    topics = {t for t, _ in sink.got}
+    assert {"/tf", "/s1/odom", "/s1/scan", "/footprints"} <= topics
+    rec.on_end(sup, None)
+    assert not sink.closed  # not owned: a live view outlives the run

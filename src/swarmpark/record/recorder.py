@@ -274,6 +274,10 @@ class Recorder:
         self._commands(t_ns)
         self._alarms(sup, t_ns)
         self._slow_parts(sup, t_ns)
+        # The samples are most of the cost: none while nobody reads them (a live view with
+        # no subscriber). Commands, alarms and the latched topics above are always written.
+        if not any(s.active() for s in self.sinks):
+            return
         if self._pose_due(t):
             self._poses(sup, t_ns)
         if self.scanning and self._ranges is not None and self._scan_due(t):

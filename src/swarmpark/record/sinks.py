@@ -24,6 +24,10 @@ class Sink(Protocol):
 
     def metadata(self, name: str, data: dict[str, str]) -> None: ...
 
+    def active(self) -> bool:
+        """Whether anything reads the messages now (else the recorder skips the samples)."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -68,6 +72,9 @@ class McapSink:
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         self._w.add_metadata(name, data)
+
+    def active(self) -> bool:
+        return not self.closed
 
     def close(self) -> None:
         if not self.closed:
@@ -129,6 +136,10 @@ class FoxgloveSink:
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         """Foxglove's live protocol has no metadata records: nothing to send."""
+
+    def active(self) -> bool:
+        """A client subscribes to at least one channel."""
+        return any(ch.has_sinks() for ch in self._channels)
 
     def close(self) -> None:
         if not self.closed:
