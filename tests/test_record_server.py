@@ -50,6 +50,8 @@ def test_serve_records_every_run_and_audits_every_command(tmp_path):
         assert c.post("/api/sim/step", json={"ticks": 2}, headers=AUTH).status_code == 200
         assert c.post("/api/sim/reset", headers=AUTH).status_code == 200  # a second run
         assert c.post("/api/sim/step", json={"ticks": 4}, headers=AUTH).status_code == 200
+        load = {"name": "rec-small.yaml"}  # a third, of another scenario
+        assert c.post("/api/scenario", json=load, headers=AUTH).status_code == 200
     # The audit file: every request, who, token or not, the answer; the alarms.
     rows = _lines(tmp_path / "audit.jsonl")
     cmds = [r for r in rows if r["event"] == "command"]
@@ -65,9 +67,10 @@ def test_serve_records_every_run_and_audits_every_command(tmp_path):
     assert cmds[1]["request"] == goto and cmds[1]["t_s"] == 0.0
     alarms = [r for r in rows if r["event"] == "alarm"]
     assert {"kind": "estop", "latched": True}.items() <= alarms[0].items()
-    assert [r["event"] for r in rows].count("start") == 2
-    # Two runs, two files; the first has the commands, the alarm and its result.
-    assert len(live.files) == 2 and all(f.is_file() for f in live.files)
+    assert [r["event"] for r in rows].count("start") == 3
+    # Three runs, three files; the first has the commands, the alarm and its result.
+    assert len(live.files) == 3 and all(f.is_file() for f in live.files)
+    assert "ui-small" in live.files[1].name and "rec-small" in live.files[2].name
     first = load_recording(live.files[0])
     assert [o["path"] for o in first.operator][:3] == ["/api/goto"] * 3
     assert first.operator[0]["accepted"] is False and first.operator[4]["path"] == "/api/estop"
@@ -80,7 +83,11 @@ def test_serve_records_every_run_and_audits_every_command(tmp_path):
     assert first.result is not None and first.result["scenario"] == "ui-small"
     assert first.duration_s == pytest.approx(22 * 0.05)
     second = load_recording(live.files[1])
-    assert second.duration_s == pytest.approx(4 * 0.05) and not second.operator[-1:] == []
+    assert second.duration_s == pytest.approx(4 * 0.05)
+    assert second.result["scenario"] == "ui-small"  # (not the scenario loaded after it)
+    assert second.operator[-1]["path"] == "/api/sim/step"
+    third = load_recording(live.files[2])
+    assert third.result["scenario"] == "rec-small" and "/s1/scan" in third.types
 
 
 async def _foxglove_client(port: int, wanted: list[str], timeout_s: float) -> dict:

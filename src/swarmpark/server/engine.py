@@ -166,7 +166,7 @@ class Session:
             return
         self._ended = sup
         result = {
-            "scenario": self.world.scenario.name,
+            "scenario": sup.world.scenario.name,
             **sup.metrics.result(sup.t, sup.sim.poses, sup.goals, sup.has_goal),
             "commands": [o.as_dict() for o in sup.outcomes],
         }
