@@ -73,10 +73,14 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=10.0,
         metavar="HZ",
-        help="pose samples per simulated second",
+        help="pose samples per simulated second in the recording (0: every tick)",
     )
     p.add_argument(
-        "--scan-rate", type=float, default=5.0, metavar="HZ", help="scans per simulated second"
+        "--scan-rate",
+        type=float,
+        default=5.0,
+        metavar="HZ",
+        help="LIDAR scans per simulated second in the recording (0: with every pose sample)",
     )
     return p
 
@@ -99,9 +103,9 @@ def _check(args) -> None:
         )
     for name in ("record_rate", "scan_rate"):
         v = getattr(args, name)
-        if not (math.isfinite(v) and v > 0):
+        if not (math.isfinite(v) and v >= 0):
             flag = "--" + name.replace("_", "-")
-            raise _BadInput(f"swarmpark serve: error: {flag} must be > 0 Hz (got {v})")
+            raise _BadInput(f"swarmpark serve: error: {flag} must be >= 0 Hz (got {v})")
 
 
 def _observers(args) -> tuple[list, list[str]]:
@@ -126,7 +130,10 @@ def _observers(args) -> tuple[list, list[str]]:
             directory=args.record,
             foxglove_port=args.foxglove,
             foxglove_host=args.foxglove_host,
-            config=RecordConfig(rate_hz=args.record_rate, scan_rate_hz=args.scan_rate),
+            # 0 Hz: every tick (as for `swarmpark run`).
+            config=RecordConfig(
+                rate_hz=args.record_rate or None, scan_rate_hz=args.scan_rate or None
+            ),
         )
         observers.append(live)
         if args.record:
