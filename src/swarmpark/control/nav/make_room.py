@@ -22,6 +22,9 @@ from swarmpark.core.geometry import footprint_corners
 
 __all__ = ["MakeRoom", "RoomResult", "RoomState"]
 
+#: People slower than this stand still: they have no walk ahead to keep clear.
+_WALKING_MPS = 1e-6
+
 
 @dataclass
 class RoomState:
@@ -65,7 +68,9 @@ class MakeRoom:
             out.append(shapely.LineString(line).buffer(half, cap_style="flat"))
             # The skid itself as it stands (it may be turning on the spot).
             out.append(shapely.Polygon(scene.corners_now(view, j)).buffer(p.clearance_m))
-        walking = np.linalg.norm(view.people_vel, axis=1) > 1e-6 if len(view.people_xy) else []
+        walking = (
+            np.linalg.norm(view.people_vel, axis=1) > _WALKING_MPS if len(view.people_xy) else []
+        )
         for k in np.flatnonzero(walking):
             v = view.people_vel[k]
             ahead = view.people_xy[k] + v / np.linalg.norm(v) * p.lookahead_m
