@@ -1,12 +1,16 @@
 """The composed navigator on hand-built views (no scenario): it parks a skid in both avoidance
 modes, its caches follow the scene by value, and its parameters are validated."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from navkit import advance, make_view
+from shapely.geometry import box
 
 from swarmpark.control.nav import AVOIDANCE_MODES, Navigator, NavParams
-from swarmpark.control.nav.params import DockingParams
+from swarmpark.control.nav.hold import hold_outside
+from swarmpark.control.nav.params import DockingParams, HoldParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.control.orca.kernel import OrcaParams
 from swarmpark.core.geometry import wrap_angle
@@ -74,3 +78,19 @@ def test_nav_params_refuse_unknown_modes_and_wrong_components():
         Navigator({"avoidance": "rvo"})
     with pytest.raises(TypeError):
         NavParams(lookahead_m=1.0)  # the flat fields are gone: NavParams(follower=...)
+
+
+def test_held_skids_stop_outside_their_boundary_but_may_back_off():
+    # Boundary from x = 5 m; the skid's front is 1.1 m from it.
+    view = make_view([[3.3, 3.0, 0.0]])
+    view = replace(view, hold=np.array([True]), hold_zones=(box(5.0, 0.0, 9.0, 6.0),))
+    towards = np.array([[0.5, 0.0]])
+    hold_outside(view, np.array([0]), towards, HoldParams())
+    assert np.array_equal(towards, np.zeros((1, 2)))
+    away = np.array([[-0.5, 0.0]])
+    hold_outside(view, np.array([0]), away, HoldParams())
+    assert away[0, 0] == -0.5
+    # Not held (fill order lets it go): it drives on.
+    free = np.array([[0.5, 0.0]])
+    hold_outside(replace(view, hold=np.array([False])), np.array([0]), free, HoldParams())
+    assert free[0, 0] == 0.5
