@@ -36,19 +36,27 @@ __all__ = [
 AVOIDANCE_MODES = ("monitor", "rvo")
 
 
+def _is_number(v) -> bool:
+    return isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
+
+
+#: Validation rules of :func:`_check`: (test, what the message says the value must be).
+_RULES = {
+    ">0": (lambda v: _is_number(v) and np.isfinite(v) and v > 0, "a finite number > 0"),
+    ">=0": (lambda v: _is_number(v) and np.isfinite(v) and v >= 0, "a finite number >= 0"),
+    "int>0": (lambda v: isinstance(v, int | np.integer) and v > 0, "an integer > 0"),
+    "share": (lambda v: _is_number(v) and 0 <= v <= 1, "a number in [0, 1]"),
+}
+
+
 def _check(obj, rules: dict[str, str]) -> None:
-    """Validate ``obj``'s fields by rule: ``>0``, ``>=0``, ``int>0``, ``share`` (in [0, 1])."""
+    """Validate ``obj``'s fields by the rules of :data:`_RULES` (ValueError names the field)."""
     cls = type(obj).__name__
     for name, rule in rules.items():
         value = getattr(obj, name)
-        ok = {
-            ">0": lambda v: np.isfinite(v) and v > 0,
-            ">=0": lambda v: np.isfinite(v) and v >= 0,
-            "int>0": lambda v: isinstance(v, int | np.integer) and v > 0,
-            "share": lambda v: np.isfinite(v) and 0 <= v <= 1,
-        }[rule](value)
-        if not ok:
-            raise ValueError(f"{cls}.{name} must be {rule} (got {value!r})")
+        test, what = _RULES[rule]
+        if not test(value):
+            raise ValueError(f"{cls}.{name} must be {what} (got {value!r})")
 
 
 def _order(obj, small: str, large: str) -> None:
@@ -74,7 +82,7 @@ class FollowerParams:
 
     def __post_init__(self) -> None:
         _check(self, {"lookahead_m": ">0", "approach_m": ">0", "switch_ratio": "share"})
-        if not 0 <= self.face_away_rad <= np.pi:
+        if not (_is_number(self.face_away_rad) and 0 <= self.face_away_rad <= np.pi):
             raise ValueError(
                 f"FollowerParams.face_away_rad must be in [0, pi] (got {self.face_away_rad!r})"
             )
@@ -176,7 +184,7 @@ class DockingParams:
         _order(self, "parked_pos_m", "resume_pos_m")
         _order(self, "parked_yaw_rad", "resume_yaw_rad")
         _order(self, "runup_m", "manoeuvre_radius_m")
-        if not 0 < self.align_first_rad < np.pi:
+        if not (_is_number(self.align_first_rad) and 0 < self.align_first_rad < np.pi):
             raise ValueError(
                 f"DockingParams.align_first_rad must be in (0, pi) (got {self.align_first_rad!r})"
             )
@@ -194,14 +202,16 @@ class MonitorParams:
     scales: tuple[float, ...] = (1.0, 0.6, 0.3, 0.0)
     #: Extra clearance the monitor keeps (the localization error is about 2 cm).
     margin_m: float = 0.03
-    #: Other skids farther than this (centre to centre) cannot overlap a grown footprint now.
+    #: Skids whose pivots are farther apart than this cannot overlap now (twice the reach of
+    #: a skid whose far corner is 1.5 m from its pivot; the default skid's is 0.72 m).
     neighbour_range_m: float = 3.0
 
     def __post_init__(self) -> None:
         _check(self, {"horizon_s": ">0", "samples": "int>0", "margin_m": ">=0"})
         _check(self, {"neighbour_range_m": ">0"})
         s = self.scales
-        if not s or s[-1] != 0.0 or any(not 0 <= x <= 1 for x in s) or list(s) != sorted(s)[::-1]:
+        numbers = isinstance(s, tuple) and all(_is_number(x) for x in s)
+        if not (numbers and s and s[-1] == 0.0 and s[0] <= 1 and list(s) == sorted(s)[::-1]):
             raise ValueError(
                 f"MonitorParams.scales must fall from at most 1 to 0 (got {self.scales!r})"
             )
@@ -333,7 +343,7 @@ class AvoidanceParams:
         _check(self, {"parked_priority": ">=0", "lookahead_m": ">0", "keep_right_rad": ">=0"})
         _check(self, {"keep_right_max_rad": ">=0", "keep_right_range_m": ">0"})
         _check(self, {"margin_m": ">=0", "horizon_s": ">0"})
-        if not 0 <= self.min_share <= 0.5:
+        if not (_is_number(self.min_share) and 0 <= self.min_share <= 0.5):
             raise ValueError(
                 f"AvoidanceParams.min_share must be in [0, 0.5] (got {self.min_share!r})"
             )
