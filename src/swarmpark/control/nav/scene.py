@@ -16,7 +16,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
-from swarmpark.core.geometry import Footprint
+from swarmpark.core.geometry import Footprint, footprint_corners
 
 __all__ = ["Scene", "SkidOutlines", "StaticSolids", "sample_polygon"]
 
@@ -125,6 +125,4 @@ class Scene:
 
     def corners_now(self, view: ControlView, i: int) -> np.ndarray:
         """Skid ``i``'s footprint corners ``(4, 2)`` where it stands."""
-        from swarmpark.core.geometry import footprint_corners
-
         return footprint_corners(view.poses[i][None], self.skids.plain[i][None])[0]
