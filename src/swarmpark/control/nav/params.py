@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from swarmpark.control.modes import AVOIDANCE_MODES
 from swarmpark.core.progress import NAV_HEADING_LEVER_M
 
 __all__ = [
@@ -30,10 +31,6 @@ __all__ = [
     "PlannerParams",
     "StallParams",
 ]
-
-#: Skid-skid avoidance modes: "monitor" (the collision monitor alone, with right of way at
-#: bottlenecks) and "rvo" (ORCA with priorities on the skids' effective centres, issue 5).
-AVOIDANCE_MODES = ("monitor", "rvo")
 
 
 def _is_number(v) -> bool:
