@@ -229,7 +229,7 @@ def cmd_figures(args) -> int:
     def say(msg: str) -> None:
         sys.stderr.write(msg + "\n")
 
-    out = run_figures(Path(args.out), quick=args.quick, progress=say)
+    out = run_figures(Path(args.out), quick=args.quick, compare=not args.no_compare, progress=say)
     for f in out["files"]:
         print(f)
     return EXIT_OK
@@ -278,6 +278,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", default="docs", metavar="DIR", help="docs directory (figures in DIR/img)"
     )
     g.add_argument("--quick", action="store_true", help="short runs (smoke test, not the docs)")
+    g.add_argument(
+        "--no-compare",
+        action="store_true",
+        help="keep assignment-comparison.md (compare costs on the Fig. 6/7 scenarios only)",
+    )
     g.set_defaults(func=cmd_figures)
 
     sub.add_parser(
