@@ -49,6 +49,16 @@ L_BAY = [[0, 0], [14, 0], [14, 5], [9, 5], [9, 11], [0, 11]]
 LAYOUT_METHODS = ("stacking", "potential", "convex")
 
 
+#: Fixed notes under the table (what the table is not).
+NOTES = (
+    "Notes. Where the two value columns disagree the gap is open (issue 21) unless the linked "
+    "page explains it (Liu Fig. 9: docs/formation.md). Liu, Sun & Zhu have no Fig. 10: their "
+    "formation errors are Fig. 6 and the timing Fig. 9. The paper values are the papers' "
+    "words where they give no number. `docs/img/ui.png` is a browser screenshot "
+    "(tests/test_browser.py) and is not made by this command.",
+)
+
+
 @dataclass(frozen=True)
 class FidelityRow:
     """One line of ``fidelity.md``."""
@@ -312,6 +322,7 @@ def fidelity_markdown(rows: list[FidelityRow], quick: bool) -> str:
     ]
     for r in rows:
         lines.append(f"| {esc(r.item)} | `{esc(r.module)}` | {esc(r.paper)} | {esc(r.swarmpark)} |")
+    lines += ["", *NOTES]
     return "\n".join(lines) + "\n"
 
 
