@@ -460,3 +460,64 @@ def test_run_paper_writes_figures_and_ranks_the_proposed_method_first(tmp_path):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
     assert "| reverse |" in (tmp_path / "formation_table.md").read_text()
     assert math.isfinite(out["experiment"]["min_obstacle_distance_m"])
+
+
+def test_unresolved_holds_the_group_once_and_resumes_when_the_obstacle_is_gone(
+    experiment, monkeypatch
+):
+    """A person standing on the path: no wait or retreat clears them, so the group is held
+    (one "unresolved"), the search is not repeated at the 20 Hz loop rate, and the plan
+    resumes once the person has not been seen for ``memory_s``."""
+    import swarmpark.control.formation.online as online
+
+    plan = experiment["plan"]
+    person = sample_reference(plan, 10.0).poses[0, :2]  # where robot 0 is due in 2 s
+    oa = OnlineAdjuster(plan, replan_period_s=1.0, memory_s=2.0, d_obs_m=0.6, max_delay_steps=4)
+    for t in np.arange(7.0, 8.0 + 1e-9, 0.25):
+        oa.observe(t, person)
+    adj = oa.update(8.0)
+    assert adj is not None and adj.decision == "unresolved" and oa.held
+    calls = []
+    search = online.adjust_for_obstacle
+    monkeypatch.setattr(
+        online, "adjust_for_obstacle", lambda *a, **k: calls.append(a[3]) or search(*a, **k)
+    )
+    q_stop = sample_reference(plan, 8.0).poses
+    for t in np.arange(8.05, 20.0, 0.05):  # the person stays: 12 s of a 20 Hz loop
+        oa.observe(t, person)
+        assert oa.update(t) is None
+        np.testing.assert_allclose(sample_reference(oa.plan, t).poses, q_stop, atol=1e-12)
+    assert calls == [] and [a.decision for a in oa.adjustments] == ["unresolved"]
+    resumed = None
+    for t in np.arange(20.0, 25.0, 0.05):  # the person has gone: no more observations
+        resumed = resumed or oa.update(t)
+    assert resumed is not None and resumed.decision == "resume" and not oa.held
+    assert [a.decision for a in oa.adjustments] == ["unresolved", "resume"]
+    t_r = resumed.t_obs_s
+    assert 22.0 - 1e-9 <= t_r <= 23.0 + 1e-9  # memory 2 s after the last sighting, 1 Hz
+    for x in (0.0, 3.0, 9.0):
+        np.testing.assert_allclose(
+            sample_reference(oa.plan, t_r + x).poses,
+            sample_reference(plan, 8.0 + x).poses,
+            atol=1e-9,
+        )
+
+
+def test_online_adjuster_decides_at_most_once_per_period(experiment, monkeypatch):
+    import swarmpark.control.formation.online as online
+
+    plan = experiment["plan"]
+    calls = []
+    search = online.adjust_for_obstacle
+    monkeypatch.setattr(
+        online, "adjust_for_obstacle", lambda *a, **k: calls.append(a[3]) or search(*a, **k)
+    )
+    t, xy, _ = crossing_obstacle(20.0, -9.0)  # far away: every decision is "continue"
+    oa = OnlineAdjuster(plan, replan_period_s=1.0, d_obs_m=0.6)
+    for ti, p in zip(t, xy, strict=True):
+        oa.observe(ti, p)
+    for ti in np.arange(8.0, 11.0 - 1e-9, 0.05):
+        oa.update(ti)
+    assert calls == pytest.approx([8.0, 9.0, 10.0])
+    with pytest.raises(ValueError, match="replan_period_s"):
+        OnlineAdjuster(plan, replan_period_s=-1.0)

@@ -170,3 +170,41 @@ AMCL = {"localization": "amcl", "recovery": True}
 )
 def test_bad_kidnap_names_the_field_and_value(sensing, message):
     assert error_of(with_(sensing=sensing, duration_s=20)).startswith(message)
+
+
+def test_person_waits_at_waypoints():
+    from swarmpark.world.scenario import Person
+
+    p = Person(
+        "w",
+        0.3,
+        np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]),
+        1.0,
+        0.0,
+        False,
+        np.array([1.0, 2.0, 0.0]),
+    )
+    assert p.route_length_m == pytest.approx(7.0)  # 4 m walked, 3 s standing at 1 m/s
+    at = {s: p.position_at(s).tolist() for s in (0.5, 1.0, 2.0, 3.5, 4.5, 6.0, 7.0, 9.0)}
+    assert at == {
+        0.5: [0, 0],
+        1.0: [0, 0],
+        2.0: [1, 0],
+        3.5: [2, 0],
+        4.5: [2, 0],
+        6.0: [2, 1],
+        7.0: [2, 2],
+        9.0: [2, 2],
+    }
+    # Without waits the route is the old one, to the bit.
+    q = Person("w", 0.3, p.waypoints, 1.0, 0.0, False)
+    assert q.route_length_m == 4.0 and q.position_at(3.0).tolist() == [2.0, 1.0]
+
+
+def test_person_waits_need_one_per_waypoint():
+    with pytest.raises(
+        ScenarioError, match=r"obstacles\[0\].*waits_s: need one wait per waypoint \(2\), got 3"
+    ):
+        from helpers import make_world
+
+        make_world(obstacles=[{"waypoints": [[1, 1], [3, 1]], "waits_s": [0, 1, 2]}])

@@ -45,3 +45,32 @@ def test_formation_transit_holds_the_block():
     assert fe["method"] == "formation"
     assert fe["max_pair_error_m"] < 0.03  # a 2 x 2 block of 1.2 m skids, held within 3 cm
     assert r["min_clearance_m"] > 0.3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("leaves", [True, False])
+def test_person_blocking_a_formation_holds_it_once(leaves):
+    """formation-person-blocks: the blocked group is held ("unresolved" reported once, not
+    every tick) and resumes when the person walks on; a person who stays keeps it standing,
+    without contact."""
+    import yaml
+
+    from swarmpark.world.scenario import parse_scenario
+
+    data = yaml.safe_load((ROOT / "formation-person-blocks.yaml").read_text())
+    if not leaves:  # the person stops on the path for good
+        walker = data["obstacles"][0]
+        walker["waypoints"], walker["waits_s"] = walker["waypoints"][:2], None
+        data["duration_s"] = 60
+    r = run_world(build_world(parse_scenario(data))).result
+    (fe,) = r["formation_error"]
+    decisions = [d["decision"] for d in fe["online"]]
+    assert decisions.count("unresolved") == 1
+    assert r["collisions"] == []
+    if leaves:
+        assert decisions[-1] == "resume" and "held" not in fe
+        assert r["success"]
+    else:
+        assert decisions[-1] == "unresolved" and fe["held"]
+        assert not r["success"]
+        assert r["min_clearance_m"] > 0.3

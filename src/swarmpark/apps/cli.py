@@ -251,6 +251,22 @@ def cmd_compare(args) -> int:
     return EXIT_OK
 
 
+# ----------------------------------------------------------------------------- figures
+
+
+def cmd_figures(args) -> int:
+    """Regenerate the docs' figures and tables and fidelity.md (see apps/figures.py)."""
+    from swarmpark.apps.figures import run_figures
+
+    def say(msg: str) -> None:
+        sys.stderr.write(msg + "\n")
+
+    out = run_figures(Path(args.out), quick=args.quick, compare=not args.no_compare, progress=say)
+    for f in out["files"]:
+        print(f)
+    return EXIT_OK
+
+
 # ----------------------------------------------------------------------------- main
 
 
@@ -305,6 +321,18 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", metavar="FILE", help="also write the table as markdown")
     c.add_argument("--workers", type=int, default=2, help="parallel runs (processes)")
     c.set_defaults(func=cmd_compare)
+
+    g = sub.add_parser("figures", help="regenerate the docs' figures, tables and fidelity.md")
+    g.add_argument(
+        "--out", default="docs", metavar="DIR", help="docs directory (figures in DIR/img)"
+    )
+    g.add_argument("--quick", action="store_true", help="short runs (smoke test, not the docs)")
+    g.add_argument(
+        "--no-compare",
+        action="store_true",
+        help="keep assignment-comparison.md (compare costs on the Fig. 6/7 scenarios only)",
+    )
+    g.set_defaults(func=cmd_figures)
 
     sub.add_parser(
         "serve",

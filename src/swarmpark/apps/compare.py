@@ -28,11 +28,13 @@ def with_cost(scn: Scenario, cost: str) -> Scenario:
     return scn.model_copy(update={"commands": cmds})
 
 
-def _run_one(args: tuple[str, str]) -> dict:
+def _run_one(args: tuple[str, str, float | None]) -> dict:
     from swarmpark.apps.run import run_world
 
-    path, cost = args
+    path, cost, duration_s = args
     scn = with_cost(load_scenario(path), cost)
+    if duration_s is not None:
+        scn = scn.model_copy(update={"duration_s": min(scn.duration_s, duration_s)})
     r = run_world(build_world(scn)).result
     ratio = None
     if r["time_to_park_s"] is not None and r["lower_bound_s"]:
@@ -51,14 +53,21 @@ def _run_one(args: tuple[str, str]) -> dict:
     }
 
 
-def compare_costs(scenarios: list[Path], costs=COSTS, workers: int = 2) -> list[dict]:
-    """Run every (scenario, cost) pair; only scenarios with a park command are used."""
+def compare_costs(
+    scenarios: list[Path], costs=COSTS, workers: int = 2, duration_s: float | None = None
+) -> list[dict]:
+    """Run every (scenario, cost) pair; only scenarios with a park command are used.
+
+    ``duration_s`` cuts every run short (smoke runs); ``workers=1`` runs in this process.
+    """
     jobs = [
-        (str(p), c)
+        (str(p), c, duration_s)
         for p in scenarios
         if any(cmd.park is not None for cmd in load_scenario(p).commands)
         for c in costs
     ]
+    if workers <= 1:
+        return [_run_one(j) for j in jobs]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         return list(pool.map(_run_one, jobs))
 

@@ -121,6 +121,17 @@ class PersonSpec(_Model):
     speed_mps: PositiveFloat = 1.2
     start_s: NonNegFloat = 0.0
     loop: bool = False
+    #: Seconds the person stands at each waypoint before walking on (one per waypoint).
+    waits_s: list[NonNegFloat] | None = None
+
+    @model_validator(mode="after")
+    def _one_wait_per_waypoint(self) -> PersonSpec:
+        if self.waits_s is not None and len(self.waits_s) != len(self.waypoints):
+            raise ValueError(
+                f"waits_s: need one wait per waypoint ({len(self.waypoints)}), "
+                f"got {len(self.waits_s)}"
+            )
+        return self
 
 
 class ParkCmd(_Model):
@@ -319,7 +330,12 @@ class RobotConfig:
 
 @dataclass(frozen=True)
 class Person:
-    """A moving obstacle: a disc walking a polyline at constant speed from ``start_s``."""
+    """A moving obstacle: a disc walking a polyline at constant speed from ``start_s``,
+    standing ``waits_s[i]`` seconds at waypoint ``i`` when given.
+
+    The walked distance ``s`` counts a wait as ``speed * wait`` metres spent in place, so the
+    simulator advances every person the same way whether it walks or stands.
+    """
 
     id: str
     radius_m: float
@@ -327,16 +343,33 @@ class Person:
     speed_mps: float
     start_s: float
     loop: bool
+    waits_s: np.ndarray | None = None  # (W,)
+
+    def _route(self) -> tuple[np.ndarray, np.ndarray]:
+        """Route points and the length of each leg (waits as legs that stay in place)."""
+        pts = np.vstack([self.waypoints, self.waypoints[:1]]) if self.loop else self.waypoints
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        if self.waits_s is None:
+            return pts, seg
+        stay = np.asarray(self.waits_s, float) * self.speed_mps  # (W,), one per waypoint
+        vpts = np.repeat(pts, 2, axis=0)[:-1]  # p0 p0 p1 p1 ... pk: stand, then walk on
+        vseg = np.empty(len(vpts) - 1)
+        vseg[0::2] = stay[
+            : len(seg)
+        ]  # a loop stands at every waypoint, a route at all but the last
+        vseg[1::2] = seg
+        if not self.loop and stay[-1] > 0:  # stand at the end, then the route is done
+            vpts = np.vstack([vpts, pts[-1:]])
+            vseg = np.append(vseg, stay[-1])
+        return vpts, vseg
 
     @property
     def route_length_m(self) -> float:
-        pts = np.vstack([self.waypoints, self.waypoints[:1]]) if self.loop else self.waypoints
-        return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+        return float(self._route()[1].sum())
 
     def position_at(self, s_m: float) -> np.ndarray:
         """Position after walking ``s_m`` metres along the route."""
-        pts = np.vstack([self.waypoints, self.waypoints[:1]]) if self.loop else self.waypoints
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        pts, seg = self._route()
         total = seg.sum()
         s = s_m % total if self.loop and total > 0 else min(s_m, total)
         cum = np.concatenate([[0.0], np.cumsum(seg)])
@@ -456,7 +489,13 @@ def build_world(scn: Scenario) -> World:
                 raise ScenarioError(f"obstacles[{i}].waypoints: repeated waypoint in {o.waypoints}")
             people.append(
                 Person(
-                    o.id or f"person{len(people)}", o.radius_m, wp, o.speed_mps, o.start_s, o.loop
+                    o.id or f"person{len(people)}",
+                    o.radius_m,
+                    wp,
+                    o.speed_mps,
+                    o.start_s,
+                    o.loop,
+                    None if o.waits_s is None else np.asarray(o.waits_s, float),
                 )
             )
     pid = [p.id for p in people]

@@ -14,7 +14,14 @@ import numpy as np
 from swarmpark.control.formation.problem import FormationPlan, _as_float
 from swarmpark.control.formation.tracking import _warp, sample_reference
 
-__all__ = ["ObstacleAdjustment", "OnlineAdjuster", "predict_obstacle", "adjust_for_obstacle"]
+__all__ = [
+    "ObstacleAdjustment",
+    "OnlineAdjuster",
+    "predict_obstacle",
+    "predicted_clearance",
+    "adjust_for_obstacle",
+    "wait_plan",
+]
 
 
 def predict_obstacle(obs_t_s, obs_xy, t_s, *, degree: int = 1) -> np.ndarray:
@@ -52,7 +59,9 @@ class ObstacleAdjustment:
     decision
         ``"continue"`` ((16) holds), ``"wait"`` ((17) holds: eq. 18), ``"reverse"`` (eq. 19) or
         ``"unresolved"`` (no wait or retreat within ``max_delay_steps`` clears the predicted
-        obstacle; the returned plan stops and waits that long, and the caller should escalate).
+        obstacle; the returned plan stops and waits that long, and the caller should escalate;
+        :class:`OnlineAdjuster` holds the group), or, from :class:`OnlineAdjuster` only,
+        ``"resume"`` (a held group carries on: ``wait_s`` is how long it stood).
     t_obs_s, wait_s, reverse_s
         Decision time ``t_obs``, waiting time (``dt_d`` or ``dt'_d``) and retreat time ``dt_r``.
     min_distance_m
@@ -103,6 +112,25 @@ def _dedupe(t, tau):
     return t[keep], tau[keep]
 
 
+def predicted_clearance(
+    plan: FormationPlan, obs_t_s, obs_xy, t0_s: float, t1_s: float, substeps: int, degree: int
+) -> float:
+    """Smallest distance from any robot of ``plan`` to the predicted obstacle over
+    ``[t0_s, t1_s]``, checked at ``substeps`` points per step of the plan."""
+    n = max(1, math.ceil(round((t1_s - t0_s) / plan.problem.dt_s, 9) * substeps))
+    tt = t0_s + np.linspace(0.0, t1_s - t0_s, n + 1)
+    xy = sample_reference(plan, tt).poses[..., :2]  # (T, R, 2)
+    obs = predict_obstacle(obs_t_s, obs_xy, tt, degree=degree)  # (T, 2)
+    return float(np.linalg.norm(xy - obs[:, None, :], axis=-1).min())
+
+
+def wait_plan(plan: FormationPlan, t_s: float, delay_s: float) -> FormationPlan:
+    """``plan`` with the whole group standing at its poses of ``t_s`` for ``delay_s`` (eq. 18)."""
+    tau = float(_warp(plan, np.array([t_s]))[0][0])
+    t_new, tau_new = _knots_wait(plan.warp_t_s, plan.warp_tau_s, t_s, tau, delay_s)
+    return replace(plan, warp_t_s=t_new, warp_tau_s=tau_new)
+
+
 def adjust_for_obstacle(
     plan: FormationPlan,
     obs_t_s,
@@ -124,7 +152,8 @@ def adjust_for_obstacle(
     plan for ``dt_r``, waits ``dt'_d`` and resumes (19). The shortest delay (``dt_d``, or
     ``2 dt_r + dt'_d``, in steps of ``dt``) is chosen for which the modified plan keeps
     ``d_obs_m`` from the predicted obstacle from ``t_obs`` until ``H`` steps after the group
-    resumes. Distances are checked at ``substeps`` points per step, not only at ``m dt``.
+    is back at its poses of ``t_obs`` (so a retreat is checked over the same stretch of path
+    as (16)). Distances are checked at ``substeps`` points per step, not only at ``m dt``.
 
     Parameters
     ----------
@@ -164,15 +193,8 @@ def adjust_for_obstacle(
         )
     ot, oxy = ot[past], oxy[past]
 
-    def window(t_end: float) -> np.ndarray:
-        n = max(1, math.ceil(round((t_end - t_obs) / dt, 9) * substeps))
-        return t_obs + np.linspace(0.0, t_end - t_obs, n + 1)
-
     def clearance(candidate: FormationPlan, t_end: float) -> float:
-        tt = window(t_end)
-        xy = sample_reference(candidate, tt).poses[..., :2]  # (T, R, 2)
-        obs = predict_obstacle(ot, oxy, tt, degree=degree)  # (T, 2)
-        return float(np.linalg.norm(xy - obs[:, None, :], axis=-1).min())
+        return predicted_clearance(candidate, ot, oxy, t_obs, t_end, substeps, degree)
 
     h_end = t_obs + horizon_steps * dt
     d16 = clearance(plan, h_end)
@@ -209,7 +231,10 @@ def adjust_for_obstacle(
     for _, kr, kd in options:
         t_new, tau_new = _knots_reverse(plan, t_obs, kr * dt, kd * dt)
         cand = replace(plan, warp_t_s=t_new, warp_tau_s=tau_new)
-        d = clearance(cand, t_obs + (kr + kd + horizon_steps) * dt)
+        # Checked until H steps after the group is back where it was at t_obs, as the wait
+        # is: a shorter window would accept retreats that only postpone (16) failing again
+        # (the group dithering in front of a standing obstacle).
+        d = clearance(cand, t_obs + (2 * kr + kd + horizon_steps) * dt)
         if d >= d_obs:
             return ObstacleAdjustment(cand, "reverse", t_obs, kd * dt, kr * dt, d)
 
@@ -221,11 +246,18 @@ def adjust_for_obstacle(
 class OnlineAdjuster:
     """Stateful wrapper around :func:`adjust_for_obstacle` for a control loop.
 
-    Feed obstacle observations with :meth:`observe`; call :meth:`update` at decision times
-    (e.g. every ``dt``). Once the obstacle has been watched for ``min_watch_s`` (the paper's
-    robots see it at 5 s and act at 8 s), each update checks (16) on the current plan and
-    modifies it when needed; :attr:`plan` is always the plan to track and
-    :attr:`adjustments` the modifications made. Deterministic: no clocks, no threads.
+    Feed obstacle observations with :meth:`observe`; call :meth:`update` as often as the loop
+    runs. Once the obstacle has been watched for ``min_watch_s`` (the paper's robots see it at
+    5 s and act at 8 s), an update checks (16) on the current plan and modifies it when
+    needed, at most once per ``replan_period_s`` (between decisions the last one stands, so
+    a 20 Hz loop does not search 20 times a second). :attr:`plan` is always the plan to track
+    and :attr:`adjustments` the decisions made, each once.
+
+    When no wait or retreat clears the prediction (``"unresolved"``) the group is *held*: it
+    stands where it is, the hold is extended as long as needed, and every decision time a
+    single check asks whether resuming now keeps ``D_obs`` over the next ``H`` steps; when it
+    does the plan resumes (an adjustment ``"resume"``). The full search is not repeated while
+    held. Deterministic: no clocks, no threads.
 
     Parameters
     ----------
@@ -233,21 +265,44 @@ class OnlineAdjuster:
         The offline plan.
     min_watch_s
         Observation time needed before predicting the obstacle.
+    replan_period_s
+        Shortest time between two decisions (0: decide at every update).
+    memory_s
+        Predict from the observations of the last ``memory_s`` only (``None``: all of them);
+        with no observation that recent the obstacle is gone.
     **kwargs
         Passed to :func:`adjust_for_obstacle` (``d_obs_m``, ``horizon_steps``, ...).
     """
 
-    def __init__(self, plan: FormationPlan, *, min_watch_s: float = 0.0, **kwargs) -> None:
+    def __init__(
+        self,
+        plan: FormationPlan,
+        *,
+        min_watch_s: float = 0.0,
+        replan_period_s: float = 0.0,
+        memory_s: float | None = None,
+        **kwargs,
+    ) -> None:
         allowed = {"d_obs_m", "horizon_steps", "max_delay_steps", "substeps", "degree"}
         unknown = set(kwargs) - allowed
         if unknown:
             raise TypeError(f"OnlineAdjuster: unknown keyword(s) {sorted(unknown)}")
         self.plan = plan
         self.min_watch_s = _as_float(min_watch_s, "min_watch_s", allow_zero=True)
+        self.replan_period_s = _as_float(replan_period_s, "replan_period_s", allow_zero=True)
+        self.memory_s = None if memory_s is None else _as_float(memory_s, "memory_s")
         self._kwargs = kwargs
         self._obs_t: list[float] = []
         self._obs_xy: list[tuple[float, float]] = []
+        self._next_decision_s = -math.inf
+        #: While held: the plan before the hold and the time the group stopped.
+        self._held: tuple[FormationPlan, float] | None = None
         self.adjustments: list[ObstacleAdjustment] = []
+
+    @property
+    def held(self) -> bool:
+        """True while the group stands because no modification cleared the obstacle."""
+        return self._held is not None
 
     def observe(self, t_s: float, xy: Sequence[float]) -> None:
         """Record the obstacle at ``xy`` (metres) at time ``t_s``."""
@@ -257,17 +312,61 @@ class OnlineAdjuster:
         self._obs_t.append(float(t_s))
         self._obs_xy.append((float(xy_arr[0]), float(xy_arr[1])))
 
+    def _observations(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        ot, oxy = np.asarray(self._obs_t), np.asarray(self._obs_xy).reshape(-1, 2)
+        if self.memory_s is not None:
+            recent = ot >= t_s - self.memory_s - 1e-9
+            ot, oxy = ot[recent], oxy[recent]
+        return ot, oxy
+
     def update(self, t_s: float) -> ObstacleAdjustment | None:
         """Decide at time ``t_s``; returns the modification made, or ``None``.
 
-        Every call re-checks (16) on the current (possibly already modified) plan with all
+        A decision re-checks (16) on the current (possibly already modified) plan with the
         observations so far, so a changed prediction leads to a further modification.
         """
         if not self._obs_t or t_s - self._obs_t[0] < self.min_watch_s - 1e-9:
             return None
-        adj = adjust_for_obstacle(self.plan, self._obs_t, self._obs_xy, t_s, **self._kwargs)
+        if t_s < self._next_decision_s - 1e-9:
+            return None  # the last decision stands until the next decision time
+        self._next_decision_s = t_s + self.replan_period_s
+        ot, oxy = self._observations(t_s)
+        if self._held is not None:
+            return self._update_held(t_s, ot, oxy)
+        if ot.size == 0:
+            return None
+        adj = adjust_for_obstacle(self.plan, ot, oxy, t_s, **self._kwargs)
         if adj.decision == "continue":
             return None
-        self.plan = adj.plan
+        if adj.decision == "unresolved":
+            self._held = (self.plan, t_s)
+            self.plan = wait_plan(self.plan, t_s, self._hold_s(0.0))
+        else:
+            self.plan = adj.plan
+        self.adjustments.append(adj)
+        return adj
+
+    def _hold_s(self, held_s: float) -> float:
+        """Length of the hold: past the next decision time and the look-ahead after it."""
+        h = self._kwargs.get("horizon_steps", 5) * self.plan.problem.dt_s
+        return held_s + self.replan_period_s + h + self.plan.problem.dt_s
+
+    def _update_held(self, t_s: float, ot: np.ndarray, oxy: np.ndarray):
+        base, t_stop = self._held
+        resumed = wait_plan(base, t_stop, t_s - t_stop)  # stood from t_stop until now
+        problem = base.problem
+        d_obs = self._kwargs.get("d_obs_m") or problem.d_safe_m
+        h_end = t_s + self._kwargs.get("horizon_steps", 5) * problem.dt_s
+        if ot.size == 0:
+            d = math.inf  # not seen for memory_s: gone
+        else:
+            sub, deg = self._kwargs.get("substeps", 10), self._kwargs.get("degree", 1)
+            d = predicted_clearance(resumed, ot, oxy, t_s, h_end, sub, deg)
+        if d < d_obs:
+            self.plan = wait_plan(base, t_stop, self._hold_s(t_s - t_stop))
+            return None
+        self._held = None
+        self.plan = resumed
+        adj = ObstacleAdjustment(resumed, "resume", t_s, t_s - t_stop, 0.0, d)
         self.adjustments.append(adj)
         return adj

@@ -30,6 +30,16 @@ __all__ = ["FormationRun", "FormationError"]
 
 #: People farther than this from every robot of the group are not watched.
 WATCH_RANGE_M = 5.0
+#: The online modification (Sect. II.D) decides at most this often (s), not every control tick:
+#: one search for a wait or retreat costs up to a few hundred ms, and the plan's look-ahead
+#: (H steps of the plan's dt, 5 s by default) is far longer than this latency.
+REPLAN_PERIOD_S = 1.0
+#: The obstacle's motion is predicted from the last this many seconds of observations (a
+#: person who walked up and stopped is predicted to stand, not to keep walking).
+PREDICTION_MEMORY_S = 3.0
+#: Longest wait or retreat searched for (s); when none clears the obstacle the group holds
+#: where it is until resuming is safe, so a longer search would only cost time.
+MAX_DELAY_S = 10.0
 #: Keep the plan's speed and acceleration this far inside the skids' limits, so the tracking
 #: law has room to correct errors.
 LIMIT_SHARE = 0.8
@@ -155,7 +165,14 @@ class FormationRun:
             raise FormationError(f"formation: {exc}") from None
         if not plan.success:
             raise FormationError(f"formation: the {cmd.method} plan failed ({plan.status})")
-        adj = OnlineAdjuster(plan, min_watch_s=min(3.0, cmd.dt_s * 3), d_obs_m=d_safe)
+        adj = OnlineAdjuster(
+            plan,
+            min_watch_s=min(3.0, cmd.dt_s * 3),
+            replan_period_s=REPLAN_PERIOD_S,
+            memory_s=PREDICTION_MEMORY_S,
+            d_obs_m=d_safe,
+            max_delay_steps=max(1, math.ceil(MAX_DELAY_S / cmd.dt_s - 1e-9)),
+        )
         return cls(np.asarray(idx, int), problem, t0, adj)
 
     @property
@@ -189,15 +206,33 @@ class FormationRun:
         )
 
     def metrics(self) -> dict:
+        """Formation error of the run, and the online decisions (each reported once)."""
         if len(self.times) < 2:
             return {}
         fm = formation_metrics(
             self.problem, np.asarray(self.times), np.stack(self.poses), np.stack(self.ref_s)
         )
-        return {
+        out = {
             "method": self.adjuster.plan.method,
             "integral_m2s": round(fm.integral_m2s, 6),
             "q_e_m2": round(fm.q_e_m2, 6),
             "max_pair_error_m": round(fm.max_pair_error_m, 4),
             "plan_duration_s": round(float(self.adjuster.plan.duration_s), 3),
         }
+        if self.adjuster.adjustments:
+            out["online"] = self.decisions()
+        if self.adjuster.held:
+            out["held"] = True
+        return out
+
+    def decisions(self) -> list[dict]:
+        """The online modifications made so far: fleet time, decision, wait and retreat (s)."""
+        return [
+            {
+                "t_s": round(self.t0 + a.t_obs_s, 3),
+                "decision": a.decision,
+                "wait_s": round(a.wait_s, 3),
+                "reverse_s": round(a.reverse_s, 3),
+            }
+            for a in self.adjuster.adjustments
+        ]
