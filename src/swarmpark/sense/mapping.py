@@ -276,6 +276,13 @@ class GridMapper:
         self._ref = None
         self._ref_scan = self.scans
 
+    def relocate(self, pose: np.ndarray, *, keyframe: np.ndarray | None = None) -> None:
+        """Move the tracked pose (and the pose of the last inserted scan, which decides the
+        next keyframe) after a correction from outside, e.g. a loop closure."""
+        self.pose = np.asarray(pose, dtype=float).reshape(3).copy()
+        if keyframe is not None:
+            self._inserted_at = np.asarray(keyframe, dtype=float).reshape(3).copy()
+
     # -- insertion ----------------------------------------------------------------------
     def insert(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         """Add a scan ``(B,)`` taken at ``pose`` (the skid's pivot) to the map."""
