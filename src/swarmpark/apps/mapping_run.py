@@ -1,7 +1,8 @@
 """Build a map with one skid's LIDAR while a scenario runs (2018 paper Sect. 3.5.2).
 
 The chosen skid's scans and drifting odometry go into a log-odds grid mapper with scan
-matching; the map is saved as ROS map_server YAML + PGM and compared with the ground truth.
+matching, whose keyframes form a pose graph with loop closures (:mod:`swarmpark.sense.slam`;
+``loop_closure=False`` keeps the scan matching only); the map is saved as ROS map_server YAML + PGM and compared with the ground truth.
 The map frame is the skid's starting pose as odometry reports it, which is where the world
 frame has it: other skids that later localize in this map share that frame.
 """
@@ -17,6 +18,7 @@ from swarmpark.core.gridmap import save_map_yaml
 from swarmpark.sense.agreement import map_agreement
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.mapping import GridMapper
+from swarmpark.sense.slam import LoopClosureConfig, PoseGraphMapper
 from swarmpark.sim.odometry import OdometryDrift
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import World
@@ -24,8 +26,11 @@ from swarmpark.world.scenario import World
 __all__ = ["build_map"]
 
 
-def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> dict:
-    """Run ``world`` while ``robot`` maps it; save the map to ``out`` and return a summary."""
+def build_map(
+    world: World, robot: str, out: str | Path, *, loop_closure: bool = True, progress=None
+) -> dict:
+    """Run ``world`` while ``robot`` maps it; save the map to ``out`` and return a summary
+    (with the pose graph's counts under ``pose_graph``)."""
     sup = Supervisor(world)
     if robot not in sup.index:
         raise ValueError(f"map --robot: unknown robot {robot!r} (have {', '.join(sup.ids)})")
@@ -43,7 +48,9 @@ def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> di
     seed = np.random.SeedSequence(world.scenario.seed).spawn(3)[2]
     scan_rng, odom_rng = (np.random.default_rng(s) for s in seed.spawn(2))
     odometry = OdometryDrift(sup.sim.poses[i : i + 1], rng=odom_rng)
-    mapper = GridMapper.like(world.grid, spec=spec)
+    mapper = PoseGraphMapper(
+        GridMapper.like(world.grid, spec=spec), LoopClosureConfig(enabled=loop_closure)
+    )
     n_ticks = int(round(world.scenario.duration_s / world.scenario.dt_s))
     drift, corrected = [], []
     for _ in range(n_ticks):
@@ -76,10 +83,11 @@ def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> di
         "robot": robot,
         "map": str(path),
         "scans": len(drift),
-        "keyframes": mapper.scans,
+        "keyframes": mapper.mapper.scans,
         "sim_time_s": round(sup.t, 3),
         "odometry_drift_final_m": round(float(drift[-1]), 4) if drift else None,
         "slam_error_final_m": round(float(corrected[-1]), 4) if corrected else None,
         "slam_error_max_m": round(float(max(corrected)), 4) if corrected else None,
         "map_agreement": {k: round(float(v), 4) for k, v in agree.items()},
+        "pose_graph": mapper.summary(),
     }

@@ -148,6 +148,7 @@ class LoopClosure:
 class _Stats:
     tried: int = 0
     rejected: dict = field(default_factory=dict)
+    log: list = field(default_factory=list)  # (old, new, inlier share, rms, verdict)
     optimizations: int = 0
     rerenders: int = 0
 
@@ -306,6 +307,7 @@ class PoseGraphMapper:
         poses = self.graph.poses
         guess = relative_pose(poses[i], poses[k])
         fit = icp_point_to_line(body, guess, ref, self._icp)
+        self.stats.log.append((i, k, round(fit.inlier_share, 3), round(fit.rms_m, 4)))
         if not self._good(fit):
             self._reject("fit")
             return None
