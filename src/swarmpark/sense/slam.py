@@ -15,8 +15,9 @@ match becomes a loop-closure edge only if it passes four gates: enough inliers a
 correspondence gate, a small RMS residual, a translation the scan constrains in both
 directions (a featureless corridor is refused), and uniqueness -- ICP started half a metre
 off in each direction must not settle elsewhere with an equally good fit (rack uprights 3 m
-apart are refused when the guess is ambiguous). Then the graph is optimized and, if a pose
-moved, the occupancy grid is re-rendered from the keyframe scans at their optimized poses.
+apart are refused when the guess is ambiguous). If a loop closure shows drift (it moves the
+keyframe by a few centimetres or more, or the front end snapped onto the old map), the graph is optimized and, if a pose moved, the
+occupancy grid is re-rendered from the keyframe scans at their optimized poses.
 
 The optimizer is swarmpark's scipy one (:mod:`swarmpark.sense.posegraph`, sparse analytic
 Jacobian, trust-region least squares). Checked instead: ``gtsam`` publishes wheels (4.2) but
@@ -80,17 +81,31 @@ class LoopClosureConfig:
         the scan does not fix the position along some direction (a corridor).
     max_correction_m, max_correction_rad
         The match may move the new keyframe this far from where the graph has it.
+    min_correction_m, min_correction_rad
+        The graph is optimized only when a new loop closure moves its keyframe at least this
+        far (or turns it this much) from where the graph has it, or when an odometry edge
+        since the last optimization came from the scan-to-scan match (the front end snapped
+        onto the old map, so the chain behind it holds drift). Smaller corrections are
+        added as edges but do not trigger an optimization: the front end already closed that
+        loop by matching against the old part of the map, and optimizing would only spread
+        the matches' own errors (on the hangar route, 0.002 rad per loop edge twisted a
+        25 m loop by 10 cm).
     ambiguity_offset_m, ambiguity_tolerance_m
         ICP is also started this far off along the body's x and y axes; if one of those
         settles more than ``ambiguity_tolerance_m`` from the first solution and passes the
         inlier and RMS gates, the place is ambiguous and the match is refused.
-    sigma_m, sigma_rad
-        Noise of a matched point, which turns ``J^T J`` into an edge's information.
+    sigma_m, independent_points
+        Noise of a matched point and how many points count as independent: they turn the
+        ICP's ``J^T J`` into an edge's information.
     odometry_sigma_m, odometry_sigma_rad
         Information floor of every edge, so that a direction the scans do not constrain is
         held by the front end's estimate.
     rerender_min_shift_m
         After an optimization, the grid is re-rendered only if a keyframe moved this much.
+    snap_m, snap_rad
+        The odometry edge between consecutive keyframes is the front end's relative pose
+        unless the scan-to-scan match of the two differs from it by more than this (the
+        front end snapped onto an old part of the map); then it is the scan-to-scan match.
     """
 
     enabled: bool = True
@@ -106,23 +121,31 @@ class LoopClosureConfig:
     max_rms_m: float = 0.04
     min_constraint: float = 0.05
     max_correction_m: float = 1.5
+    min_correction_m: float = 0.03
+    min_correction_rad: float = 0.01
     max_correction_rad: float = np.radians(20.0)
     ambiguity_offset_m: float = 0.5
     ambiguity_tolerance_m: float = 0.15
-    sigma_m: float = 0.03
-    sigma_rad: float = 0.05
+    sigma_m: float = 0.02
+    independent_points: int = 25
     odometry_sigma_m: float = 0.1
     odometry_sigma_rad: float = 0.05
     rerender_min_shift_m: float = 0.01
+    snap_m: float = 0.02
+    snap_rad: float = 0.01
 
     def __post_init__(self) -> None:
-        for name in ("search_radius_m", "max_dist_m", "min_dist_m", "sigma_m", "sigma_rad"):
+        for name in ("search_radius_m", "max_dist_m", "min_dist_m", "sigma_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"loop_closure.{name} must be > 0 (got {getattr(self, name)})")
         if self.min_dist_m > self.max_dist_m:
             raise ValueError(
                 "loop_closure.min_dist_m must be <= max_dist_m "
                 f"(got {self.min_dist_m}, {self.max_dist_m})"
+            )
+        if self.independent_points < 1:
+            raise ValueError(
+                f"loop_closure.independent_points must be >= 1 (got {self.independent_points})"
             )
         if self.min_separation_keyframes < 1 or self.max_candidates < 1:
             raise ValueError(
@@ -142,6 +165,7 @@ class LoopClosure:
     z: np.ndarray
     inlier_share: float
     rms_m: float
+    drift: bool = False  # the match moved the keyframe by min_correction or more
 
 
 @dataclass
@@ -150,6 +174,7 @@ class _Stats:
     rejected: dict = field(default_factory=dict)
     log: list = field(default_factory=list)  # (old, new, inlier share, rms, verdict)
     optimizations: int = 0
+    snaps: int = 0
     rerenders: int = 0
 
 
@@ -174,6 +199,8 @@ class PoseGraphMapper:
         self.ranges: list[np.ndarray] = []  # each keyframe's scan, to re-render the map
         self._body: list[np.ndarray] = []
         self._refs: dict[int, tuple] = {}
+        self._front: list[np.ndarray] = []  # the front end's pose of each keyframe
+        self._unresolved = False
         self.loops: list[LoopClosure] = []
         self.stats = _Stats()
         cfg = self.config
@@ -220,11 +247,11 @@ class PoseGraphMapper:
         if fit is None:
             return floor
         n = max(fit.inlier_share * cfg.match_points, 1.0)
-        # J^T J per point, over the point noise: the information of an average point; the
-        # points' errors are correlated (the same walls, the same normals), so they do not
-        # add up as independent ones would.
-        scale = np.diag([1.0 / cfg.sigma_m, 1.0 / cfg.sigma_m, 1.0 / cfg.sigma_rad])
-        info = scale @ (fit.hessian / n) @ scale
+        # J^T J over the point noise is the information of n independent points; the points'
+        # errors are correlated (the same walls, the same normals), so count at most
+        # ``independent_points`` of them. J's rotation column is in metres (the lever arm), so
+        # this weighs rotation against translation as the scan geometry does.
+        info = fit.hessian * (min(n, cfg.independent_points) / n) / cfg.sigma_m**2
         return 0.5 * (info + info.T) + floor
 
     def _reference(self, k: int, span: int) -> tuple | None:
@@ -247,22 +274,30 @@ class PoseGraphMapper:
         k = self.graph.add_node(pose)
         self.ranges.append(ranges)
         self._body.append(self.mapper.body_points(ranges))
+        self._front.append(pose.copy())
         if k == 0:
             return
-        poses = self.graph.poses
-        guess = relative_pose(poses[k - 1], poses[k])
+        # The front end's relative pose is the better odometry edge (matched against the map,
+        # not one scan) -- except where it snapped back onto an old part of the map: then it
+        # carries the correction a loop closure should spread, and the scan-to-scan match of
+        # the two keyframes, which knows nothing of the old map, disagrees with it.
+        front = relative_pose(self._front[k - 1], self._front[k])
         ref = self._reference(k - 1, 0)
-        fit = None
         body = self._sample(self._body[k])
+        fit = None
         if ref is not None and len(body) >= 3:
-            fit = icp_point_to_line(body, guess, ref, self.mapper.config)
-            corr = fit.pose - guess
-            if (
-                fit.inlier_share < self.mapper.config.match_min_inliers
-                or np.hypot(corr[0], corr[1]) > self.mapper.config.match_max_correction_m
-            ):
+            fit = icp_point_to_line(body, front, ref, self.mapper.config)
+            if fit.inlier_share < self.mapper.config.match_min_inliers:
                 fit = None
-        z = guess if fit is None else fit.pose
+        z = front
+        if fit is not None:
+            jump = relative_pose(front, fit.pose)
+            if np.hypot(jump[0], jump[1]) > self.config.snap_m or abs(jump[2]) > (
+                self.config.snap_rad
+            ):
+                z = fit.pose
+                self.stats.snaps += 1
+                self._unresolved = True  # the graph now disagrees with the front end's poses
         self.graph.add_edge(k - 1, k, z, self._information(fit))
         if self.config.enabled:
             self._close_loops(k)
@@ -329,7 +364,10 @@ class PoseGraphMapper:
             ):
                 self._reject("ambiguous")
                 return None
-        return LoopClosure(i, k, fit.pose, fit.inlier_share, fit.rms_m), fit
+        drift = np.hypot(corr[0], corr[1]) >= cfg.min_correction_m or abs(corr[2]) >= (
+            cfg.min_correction_rad
+        )
+        return LoopClosure(i, k, fit.pose, fit.inlier_share, fit.rms_m, bool(drift)), fit
 
     def _close_loops(self, k: int) -> None:
         found = []
@@ -341,7 +379,9 @@ class PoseGraphMapper:
                 self.graph.add_edge(i, k, loop.z, self._information(fit), loop=True)
                 self.loops.append(loop)
                 found.append(loop)
-        if found:
+        # Optimize only on evidence of drift: where the front end already matched the old map,
+        # the optimum of the graph would differ from it by the matches' own errors only.
+        if found and (self._unresolved or any(lc.drift for lc in found)):
             self.optimize()
 
     def optimize(self) -> dict:
@@ -350,6 +390,7 @@ class PoseGraphMapper:
         before = self.graph.poses
         report = self.graph.optimize()
         self.stats.optimizations += 1
+        self._unresolved = False
         after = self.graph.poses
         shift = float(np.max(np.hypot(*(after[:, :2] - before[:, :2]).T)))
         report["max_shift_m"] = shift
@@ -359,6 +400,7 @@ class PoseGraphMapper:
             # The front end tracks on from the newest keyframe's optimized pose.
             delta = relative_pose(before[-1], self.mapper.pose)
             self.mapper.relocate(compose(after[-1], delta), keyframe=after[-1])
+            self._front[-1] = after[-1].copy()
         return report
 
     def rerender(self) -> None:
@@ -379,6 +421,7 @@ class PoseGraphMapper:
             "loop_closures": len(self.loops),
             "loop_candidates_tried": self.stats.tried,
             "loop_candidates_rejected": dict(sorted(self.stats.rejected.items())),
+            "odometry_edges_from_scan_to_scan": self.stats.snaps,
             "optimizations": self.stats.optimizations,
             "rerenders": self.stats.rerenders,
         }
