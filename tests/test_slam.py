@@ -110,9 +110,10 @@ def test_no_loop_closure_in_a_featureless_corridor():
 
 
 def test_no_false_loop_closure_among_repeated_posts():
-    """A corridor with a post every 3 m on one side and an odometry that over-counts by 8 %:
-    coming back, the estimate is over a metre off, near the wrong post. Candidates that look
-    alike from several starting points are refused as ambiguous; no accepted edge is false."""
+    """A corridor with a post every 3 m on one side and an odometry that over-counts by 8 %
+    (no scan matching in the front end): at the far end the estimate is 2.4 m off, near the
+    wrong post. Candidates that look alike from several starting points are refused as
+    ambiguous; every accepted edge is true."""
     walls = [box(0, 0.9, 40, 1.0), box(0, 5.0, 40, 5.1)]
     walls += [box(x, 3.6, x + 0.3, 3.9) for x in np.arange(4.0, 37.0, 3.0)]
     g = grid_from_walls((40.0, 6.0), 0.05, walls)
@@ -124,6 +125,7 @@ def test_no_false_loop_closure_among_repeated_posts():
     truth = []
     prev = route[0]
     odom = route[0].copy()
+    worst = 0.0
     for p in route:
         step = relative_pose(prev, p)
         c, s = np.cos(odom[2]), np.sin(odom[2])
@@ -134,11 +136,13 @@ def test_no_false_loop_closure_among_repeated_posts():
         m.update(odom, scan(SPEC, p[None], gf, rng=rng)[0])
         if len(m.graph) > n:
             truth.append(p)
+        worst = max(worst, np.hypot(*(m.pose[:2] - p[:2])))
     truth = np.array(truth)
-    off = np.hypot(*(m.keyframe_poses[-1, :2] - truth[-1, :2]))
-    assert off > 1.0  # the guess is near the wrong post
+    assert worst > 1.0  # on the way back the guesses were a third of a period off or more
     s = m.summary()
     assert s["loop_candidates_tried"] > 10
+    # Measured: 106 candidates, 105 refused as ambiguous, one true edge at the start.
+    assert s["loop_candidates_rejected"].get("ambiguous", 0) > 50
     for lc in m.loops:
         true_z = relative_pose(truth[lc.i], truth[lc.j])
         assert np.hypot(*(lc.z[:2] - true_z[:2])) < 0.1, (lc.i, lc.j, off)
