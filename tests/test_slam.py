@@ -145,7 +145,7 @@ def test_no_false_loop_closure_among_repeated_posts():
     assert s["loop_candidates_rejected"].get("ambiguous", 0) > 50
     for lc in m.loops:
         true_z = relative_pose(truth[lc.i], truth[lc.j])
-        assert np.hypot(*(lc.z[:2] - true_z[:2])) < 0.1, (lc.i, lc.j, off)
+        assert np.hypot(*(lc.z[:2] - true_z[:2])) < 0.1, (lc.i, lc.j)
 
 
 def test_bad_loop_closure_settings_are_refused():
