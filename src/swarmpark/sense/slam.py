@@ -11,8 +11,9 @@ meant to spread). A new keyframe is matched against older keyframes (not the las
 ``min_separation_keyframes``) whose estimated pose is within ``search_radius_m``: place
 recognition by proximity, then scan-to-scan ICP (:func:`~swarmpark.sense.scanmatch.
 icp_point_to_line`, the front end's matcher) against the old keyframe and its neighbours. A
-match becomes a loop-closure edge only if it passes four gates: enough inliers at the final
-correspondence gate, a small RMS residual, a translation the scan constrains in both
+match becomes a loop-closure edge only if it passes five gates: enough inliers at the final
+correspondence gate, a small RMS residual, points seen from the same side of their surfaces
+in both scans (the two faces of a rack upright are 0.6 m apart and parallel), a translation the scan constrains in both
 directions (a featureless corridor is refused), and uniqueness -- ICP started half a metre
 off in each direction must not settle elsewhere with an equally good fit (rack uprights 3 m
 apart are refused when the guess is ambiguous). If a loop closure shows drift (it moves the
@@ -76,6 +77,9 @@ class LoopClosureConfig:
         Share of scan points with a correspondence within ``min_dist_m`` at the end.
     max_rms_m
         RMS point-to-line residual at the end.
+    min_facing
+        Share of the matched points that must have been seen from the same side of their
+        surface in both scans (else two faces of a thin thing were laid onto each other).
     min_constraint
         Smallest over largest eigenvalue of the translational block of ``J^T J``: below it
         the scan does not fix the position along some direction (a corridor).
@@ -120,6 +124,7 @@ class LoopClosureConfig:
     min_inliers: float = 0.6
     max_rms_m: float = 0.04
     min_constraint: float = 0.05
+    min_facing: float = 0.9
     max_correction_m: float = 1.5
     min_correction_m: float = 0.03
     min_correction_rad: float = 0.01
@@ -198,7 +203,8 @@ class PoseGraphMapper:
         self.graph = PoseGraph()
         self.ranges: list[np.ndarray] = []  # each keyframe's scan, to re-render the map
         self._body: list[np.ndarray] = []
-        self._refs: dict[int, tuple] = {}
+        self._refs: dict[tuple, tuple] = {}
+        self._eyes: dict[tuple, np.ndarray] = {}
         self._front: list[np.ndarray] = []  # the front end's pose of each keyframe
         self._unresolved = False
         self.loops: list[LoopClosure] = []
@@ -262,13 +268,31 @@ class PoseGraphMapper:
             return self._refs[key]
         poses = self.graph.poses
         last = len(self._body) - 1
-        parts = []
+        parts, eyes = [], []
         for m in range(max(k - span, 0), min(k + span, last - 1) + 1):
-            parts.append(_transform(relative_pose(poses[k], poses[m]), self._body[m]))
+            rel = relative_pose(poses[k], poses[m])
+            parts.append(_transform(rel, self._body[m]))
+            eyes.append(np.broadcast_to(rel[:2], parts[-1].shape))
         pts = np.concatenate(parts) if parts else np.zeros((0, 2))
         ref = surface_reference(pts) if len(pts) >= 10 else None
+        # Where each point was seen from: the side of the surface it lies on.
+        self._eyes[key] = np.concatenate(eyes) if eyes else np.zeros((0, 2))
         self._refs[key] = ref
         return ref
+
+    def _facing_share(self, key: tuple, ref: tuple, body: np.ndarray, pose: np.ndarray) -> float:
+        """Share of the matched points seen from the same side of their surface in both
+        scans: a thin wall or a rack upright seen from its two sides gives two parallel faces
+        (0.6 m apart for the racks) that ICP happily lays onto each other."""
+        tree, ref_pts, _ = ref
+        pts = _transform(pose, body)
+        dist, j = tree.query(pts, distance_upper_bound=self.config.min_dist_m)
+        ok = dist < np.inf
+        if not ok.any():
+            return 0.0
+        view_ref = self._eyes[key][j[ok]] - ref_pts[j[ok]]
+        view_new = pose[:2] - pts[ok]
+        return float(np.mean(np.einsum("ij,ij->i", view_ref, view_new) > 0.0))
 
     def _add_keyframe(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         k = self.graph.add_node(pose)
@@ -351,6 +375,9 @@ class PoseGraphMapper:
             cfg.max_correction_rad
         ):
             self._reject("correction")
+            return None
+        if self._facing_share((i, cfg.submap_keyframes), ref, body, fit.pose) < cfg.min_facing:
+            self._reject("opposite faces")
             return None
         ev = np.linalg.eigvalsh(fit.hessian[:2, :2])
         if ev[0] < cfg.min_constraint * max(ev[1], 1e-12):
