@@ -52,7 +52,7 @@ def build_map(
         GridMapper.like(world.grid, spec=spec), LoopClosureConfig(enabled=loop_closure)
     )
     n_ticks = int(round(world.scenario.duration_s / world.scenario.dt_s))
-    drift, corrected = [], []
+    drift, corrected, keyframe_truth = [], [], []
     for _ in range(n_ticks):
         sup.tick()
         sim = sup.sim
@@ -69,7 +69,10 @@ def build_map(
             rng=scan_rng,
         )
         odom = odometry.step(sim.poses[i : i + 1])[0]
+        n_keyframes = len(mapper.graph)
         mapper.update(odom, ranges[0])
+        if len(mapper.graph) > n_keyframes:
+            keyframe_truth.append(sim.poses[i].copy())
         drift.append(np.hypot(*(odom[:2] - sim.poses[i, :2])))
         corrected.append(np.hypot(*(mapper.pose[:2] - sim.poses[i, :2])))
         if progress is not None:
@@ -77,6 +80,12 @@ def build_map(
         if sup.settled():
             break
     built = mapper.to_occupancy_grid()
+    # Where the map's keyframes ended (after the last optimization) against where they were.
+    kf_err = (
+        np.hypot(*(mapper.keyframe_poses[:, :2] - np.array(keyframe_truth)[:, :2]).T)
+        if keyframe_truth
+        else np.zeros(0)
+    )
     path = save_map_yaml(built, out)
     agree = map_agreement(built, world.grid, tolerance_cells=1)
     return {
@@ -88,6 +97,8 @@ def build_map(
         "odometry_drift_final_m": round(float(drift[-1]), 4) if drift else None,
         "slam_error_final_m": round(float(corrected[-1]), 4) if corrected else None,
         "slam_error_max_m": round(float(max(corrected)), 4) if corrected else None,
+        "keyframe_error_max_m": round(float(kf_err.max()), 4) if len(kf_err) else None,
+        "keyframe_error_mean_m": round(float(kf_err.mean()), 4) if len(kf_err) else None,
         "map_agreement": {k: round(float(v), 4) for k, v in agree.items()},
         "pose_graph": mapper.summary(),
     }

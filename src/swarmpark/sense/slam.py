@@ -284,15 +284,18 @@ class PoseGraphMapper:
         """Share of the matched points seen from the same side of their surface in both
         scans: a thin wall or a rack upright seen from its two sides gives two parallel faces
         (0.6 m apart for the racks) that ICP happily lays onto each other."""
-        tree, ref_pts, _ = ref
+        tree, ref_pts, normals = ref
         pts = _transform(pose, body)
         dist, j = tree.query(pts, distance_upper_bound=self.config.min_dist_m)
         ok = dist < np.inf
         if not ok.any():
             return 0.0
-        view_ref = self._eyes[key][j[ok]] - ref_pts[j[ok]]
-        view_new = pose[:2] - pts[ok]
-        return float(np.mean(np.einsum("ij,ij->i", view_ref, view_new) > 0.0))
+        jo = j[ok]
+        # The side of the surface (its normal) each eye is on; the view directions themselves
+        # may differ a lot (one wall seen from either end).
+        side_ref = np.einsum("ij,ij->i", normals[jo], self._eyes[key][jo] - ref_pts[jo])
+        side_new = np.einsum("ij,ij->i", normals[jo], pose[:2] - pts[ok])
+        return float(np.mean(side_ref * side_new > 0.0))
 
     def _add_keyframe(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         k = self.graph.add_node(pose)
