@@ -24,8 +24,8 @@ def test_map_command_writes_a_map_that_agrees_with_the_hangar(tmp_path, capsys):
     assert grid.shape == (400, 600) and grid.occupied.any()
     agree = summary["map_agreement"]
     # Measured (the loop and the two legs through the middle): every observed cell right, all
-    # the observable cells observed, wall precision 0.995 and recall 1.00; after the loop
-    # closures the keyframes are at most 0.08 m off while the odometry drifts 1.9 m (without
+    # the observable cells observed, wall precision 1.00 and recall 1.00; after the loop
+    # closures the keyframes are at most 0.07 m off while the odometry drifts 1.9 m (without
     # loop closure: 0.33 m, recall 0.97; before keyframes: wall precision 0.63 on the loop).
     assert agree["share_correct"] > 0.99
     assert agree["share_observed"] > 0.95
@@ -35,7 +35,7 @@ def test_map_command_writes_a_map_that_agrees_with_the_hangar(tmp_path, capsys):
     assert summary["slam_error_final_m"] < 0.05
     assert summary["odometry_drift_final_m"] > 0.5  # there was drift to remove
     assert summary["scans"] > 1000
-    # The route comes back to places it mapped: the pose graph finds the loop closures (88)
+    # The route comes back to places it mapped: the pose graph finds the loop closures (91)
     # and is optimized when they show drift (3 times); the facing gate refuses the racks'
     # opposite faces.
     graph = summary["pose_graph"]

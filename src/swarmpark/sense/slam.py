@@ -21,7 +21,7 @@ keyframe by a few centimetres or more, or the front end snapped onto the old map
 occupancy grid is re-rendered from the keyframe scans at their optimized poses.
 
 The optimizer is swarmpark's scipy one (:mod:`swarmpark.sense.posegraph`, sparse analytic
-Jacobian, trust-region least squares). Checked instead: ``gtsam`` publishes wheels (4.2) but
+Jacobian, Levenberg-Marquardt with a sparse direct solve). Checked instead: ``gtsam`` publishes wheels (4.2) but
 pins numpy < 2 here, and ``small_gicp`` registers 3-D clouds (2-D scans lifted to z = 0 with
 point-to-plane/GICP, which are degenerate for a flat scan) and has no pose-graph back end. A
 500-keyframe graph optimizes in well under a second with scipy (``swarmpark bench``), which is

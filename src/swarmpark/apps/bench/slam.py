@@ -58,7 +58,7 @@ def _graph(truth: np.ndarray, rng: np.random.Generator):
 
 @register(
     "sense.posegraph",
-    "pose-graph optimization (scipy sparse least squares) and map re-render, 500 keyframes",
+    "pose-graph optimization (Levenberg-Marquardt, sparse direct solve) and map re-render",
     target="optimization < 1 s at 500 keyframes; re-render < 5 s",
 )
 def bench_posegraph(quick: bool) -> list[dict]:
@@ -68,7 +68,7 @@ def bench_posegraph(quick: bool) -> list[dict]:
     from swarmpark.sense.slam import PoseGraphMapper
 
     rows = []
-    for n in (100, 500) if not quick else (500,):
+    for n in (300, 500) if not quick else (500,):
         truth = _laps(n)
         rng = np.random.default_rng(7)
         g, loops = _graph(truth, rng)
