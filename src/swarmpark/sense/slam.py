@@ -5,20 +5,22 @@ re-rendered from the optimized poses (graph SLAM: Grisetti, Kümmerle, Stachniss
 :class:`PoseGraphMapper` wraps a :class:`~swarmpark.sense.mapping.GridMapper` (the front end:
 scan-to-map ICP of every scan, a keyframe every 0.5 m / 15 deg). Each keyframe becomes a node
 of a :class:`~swarmpark.sense.posegraph.PoseGraph` and keeps its scan. Consecutive keyframes
-are joined by a scan-to-scan ICP edge (the front end's own relative pose would carry the jump
-it makes when it snaps back onto an old part of the map, hiding the drift the loop closure is
-meant to spread). A new keyframe is matched against older keyframes (not the last
+are joined by the front end's relative pose, unless the scan-to-scan ICP of the two disagrees
+with it: then the front end snapped back onto an old part of the map, its relative pose
+carries the correction (hiding the drift behind it from the graph), and the scan-to-scan
+match is the edge. A new keyframe is matched against older keyframes (not the last
 ``min_separation_keyframes``) whose estimated pose is within ``search_radius_m``: place
 recognition by proximity, then scan-to-scan ICP (:func:`~swarmpark.sense.scanmatch.
 icp_point_to_line`, the front end's matcher) against the old keyframe and its neighbours. A
 match becomes a loop-closure edge only if it passes five gates: enough inliers at the final
 correspondence gate, a small RMS residual, points seen from the same side of their surfaces
-in both scans (the two faces of a rack upright are 0.6 m apart and parallel), a translation the scan constrains in both
-directions (a featureless corridor is refused), and uniqueness -- ICP started half a metre
-off in each direction must not settle elsewhere with an equally good fit (rack uprights 3 m
-apart are refused when the guess is ambiguous). If a loop closure shows drift (it moves the
-keyframe by a few centimetres or more, or the front end snapped onto the old map), the graph is optimized and, if a pose moved, the
-occupancy grid is re-rendered from the keyframe scans at their optimized poses.
+in both scans (the two faces of a rack upright are 0.6 m apart and parallel), a translation
+the scan constrains in both directions (a featureless corridor is refused), and uniqueness --
+ICP started half a metre off in each direction must not settle elsewhere with an equally
+good fit (rack uprights 3 m apart are refused when the guess is ambiguous). If a loop closure
+shows drift (it moves the keyframe by a few centimetres or more, or the front end snapped
+onto the old map), the graph is optimized and, if a pose moved, the occupancy grid is
+re-rendered from the keyframe scans at their optimized poses.
 
 The optimizer is swarmpark's scipy one (:mod:`swarmpark.sense.posegraph`, sparse analytic
 Jacobian, Levenberg-Marquardt with a sparse direct solve). Checked instead (``pip download
