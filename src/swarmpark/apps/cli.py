@@ -217,7 +217,13 @@ def cmd_map(args) -> int:
     if args.robot not in world.ids:
         return _fail(f"map --robot: unknown robot {args.robot!r} (have {', '.join(world.ids)})")
     show = sys.stderr.isatty()
-    summary = build_map(world, args.robot, args.out, progress=terminal_progress if show else None)
+    summary = build_map(
+        world,
+        args.robot,
+        args.out,
+        loop_closure=not args.no_loop_closure,
+        progress=terminal_progress if show else None,
+    )
     if show:
         sys.stderr.write("\n")
     print(json.dumps(summary, indent=2))
@@ -314,6 +320,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("scenario", help="scenario YAML file (the route is its commands)")
     m.add_argument("--robot", required=True, help="the skid that maps")
     m.add_argument("--out", required=True, metavar="FILE", help="map_server YAML to write")
+    m.add_argument(
+        "--no-loop-closure",
+        action="store_true",
+        help="keyframe scan matching only (no pose graph optimization)",
+    )
     m.set_defaults(func=cmd_map)
 
     c = sub.add_parser("compare", help="compare assignment costs on the scenario suite")

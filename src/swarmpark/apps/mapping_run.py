@@ -1,7 +1,8 @@
 """Build a map with one skid's LIDAR while a scenario runs (2018 paper Sect. 3.5.2).
 
 The chosen skid's scans and drifting odometry go into a log-odds grid mapper with scan
-matching; the map is saved as ROS map_server YAML + PGM and compared with the ground truth.
+matching, whose keyframes form a pose graph with loop closures (:mod:`swarmpark.sense.slam`;
+``loop_closure=False`` keeps the scan matching only); the map is saved as ROS map_server YAML + PGM and compared with the ground truth.
 The map frame is the skid's starting pose as odometry reports it, which is where the world
 frame has it: other skids that later localize in this map share that frame.
 """
@@ -17,6 +18,7 @@ from swarmpark.core.gridmap import save_map_yaml
 from swarmpark.sense.agreement import map_agreement
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
 from swarmpark.sense.mapping import GridMapper
+from swarmpark.sense.slam import LoopClosureConfig, PoseGraphMapper
 from swarmpark.sim.odometry import OdometryDrift
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import World
@@ -24,8 +26,11 @@ from swarmpark.world.scenario import World
 __all__ = ["build_map"]
 
 
-def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> dict:
-    """Run ``world`` while ``robot`` maps it; save the map to ``out`` and return a summary."""
+def build_map(
+    world: World, robot: str, out: str | Path, *, loop_closure: bool = True, progress=None
+) -> dict:
+    """Run ``world`` while ``robot`` maps it; save the map to ``out`` and return a summary
+    (with the pose graph's counts under ``pose_graph``)."""
     sup = Supervisor(world)
     if robot not in sup.index:
         raise ValueError(f"map --robot: unknown robot {robot!r} (have {', '.join(sup.ids)})")
@@ -43,9 +48,11 @@ def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> di
     seed = np.random.SeedSequence(world.scenario.seed).spawn(3)[2]
     scan_rng, odom_rng = (np.random.default_rng(s) for s in seed.spawn(2))
     odometry = OdometryDrift(sup.sim.poses[i : i + 1], rng=odom_rng)
-    mapper = GridMapper.like(world.grid, spec=spec)
+    mapper = PoseGraphMapper(
+        GridMapper.like(world.grid, spec=spec), LoopClosureConfig(enabled=loop_closure)
+    )
     n_ticks = int(round(world.scenario.duration_s / world.scenario.dt_s))
-    drift, corrected = [], []
+    drift, corrected, keyframe_truth = [], [], []
     for _ in range(n_ticks):
         sup.tick()
         sim = sup.sim
@@ -62,7 +69,10 @@ def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> di
             rng=scan_rng,
         )
         odom = odometry.step(sim.poses[i : i + 1])[0]
+        n_keyframes = len(mapper.graph)
         mapper.update(odom, ranges[0])
+        if len(mapper.graph) > n_keyframes:
+            keyframe_truth.append(sim.poses[i].copy())
         drift.append(np.hypot(*(odom[:2] - sim.poses[i, :2])))
         corrected.append(np.hypot(*(mapper.pose[:2] - sim.poses[i, :2])))
         if progress is not None:
@@ -70,16 +80,25 @@ def build_map(world: World, robot: str, out: str | Path, *, progress=None) -> di
         if sup.settled():
             break
     built = mapper.to_occupancy_grid()
+    # Where the map's keyframes ended (after the last optimization) against where they were.
+    kf_err = (
+        np.hypot(*(mapper.keyframe_poses[:, :2] - np.array(keyframe_truth)[:, :2]).T)
+        if keyframe_truth
+        else np.zeros(0)
+    )
     path = save_map_yaml(built, out)
     agree = map_agreement(built, world.grid, tolerance_cells=1)
     return {
         "robot": robot,
         "map": str(path),
         "scans": len(drift),
-        "keyframes": mapper.scans,
+        "keyframes": mapper.mapper.scans,
         "sim_time_s": round(sup.t, 3),
         "odometry_drift_final_m": round(float(drift[-1]), 4) if drift else None,
         "slam_error_final_m": round(float(corrected[-1]), 4) if corrected else None,
         "slam_error_max_m": round(float(max(corrected)), 4) if corrected else None,
+        "keyframe_error_max_m": round(float(kf_err.max()), 4) if len(kf_err) else None,
+        "keyframe_error_mean_m": round(float(kf_err.mean()), 4) if len(kf_err) else None,
         "map_agreement": {k: round(float(v), 4) for k, v in agree.items()},
+        "pose_graph": mapper.summary(),
     }

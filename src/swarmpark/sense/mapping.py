@@ -23,22 +23,19 @@ from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import DEFAULT_FREE_THRESH, DEFAULT_OCCUPIED_THRESH, OccupancyGrid
 from swarmpark.sense.agreement import map_agreement  # moved there; re-exported for old callers
 from swarmpark.sense.lidar import LidarSpec, beam_angles, sensor_poses
+from swarmpark.sense.scanmatch import IcpFit, icp_point_to_line, surface_reference
 
 __all__ = [
     "MapperConfig",
     "GridMapper",
     "MatchResult",
+    "IcpFit",
+    "icp_point_to_line",
+    "surface_reference",
     "compose",
     "relative_pose",
     "map_agreement",
 ]
-
-
-#: Neighbours used to estimate the surface normal at a reference point.
-NORMAL_NEIGHBOURS = 7
-#: ICP stops when a step moves less than this (and the gate is at its floor).
-MATCH_CONVERGED_M = 1e-4
-MATCH_CONVERGED_RAD = 1e-4
 
 
 def _logit(p: float) -> float:
@@ -178,13 +175,15 @@ class MapperConfig:
 @dataclass(frozen=True)
 class MatchResult:
     """Outcome of one scan match: the pose used, whether the match was accepted, the share of
-    scan points with a correspondence, the RMS point-to-line residual and the iterations."""
+    scan points with a correspondence, the RMS point-to-line residual, the iterations and the
+    ICP's ``J^T J`` (see :class:`IcpFit`; ``None`` when no match was tried)."""
 
     pose: np.ndarray
     accepted: bool
     inlier_share: float
     rms_m: float
     iterations: int
+    hessian: np.ndarray | None = None
 
 
 class GridMapper:
@@ -263,6 +262,27 @@ class GridMapper:
         )
         return pts, hit
 
+    def body_points(self, ranges: np.ndarray) -> np.ndarray:
+        """End points ``(K, 2)`` of a scan's returns in the skid's body frame."""
+        return self._body_points(ranges)[0]
+
+    def clear(self) -> None:
+        """Forget every inserted scan (the map and the matcher's reference), keeping the
+        tracked pose: the pose-graph mapper re-renders the map from optimized poses."""
+        self.log_odds[:] = 0.0
+        self.observed[:] = False
+        self._hit_sum[:] = 0.0
+        self._hit_count[:] = 0
+        self._ref = None
+        self._ref_scan = self.scans
+
+    def relocate(self, pose: np.ndarray, *, keyframe: np.ndarray | None = None) -> None:
+        """Move the tracked pose (and the pose of the last inserted scan, which decides the
+        next keyframe) after a correction from outside, e.g. a loop closure."""
+        self.pose = np.asarray(pose, dtype=float).reshape(3).copy()
+        if keyframe is not None:
+            self._inserted_at = np.asarray(keyframe, dtype=float).reshape(3).copy()
+
     # -- insertion ----------------------------------------------------------------------
     def insert(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         """Add a scan ``(B,)`` taken at ``pose`` (the skid's pivot) to the map."""
@@ -332,19 +352,7 @@ class GridMapper:
         cells = (self.log_odds > 0) & (self._hit_count > 0)
         if cells.sum() < 10:
             return None
-        pts = self._hit_sum[cells] / self._hit_count[cells][:, None]
-        tree = cKDTree(pts)
-        k = min(NORMAL_NEIGHBOURS, len(pts))
-        _, nb = tree.query(pts, k=k)
-        nbp = pts[nb]  # (M, k, 2)
-        d = nbp - nbp.mean(axis=1, keepdims=True)
-        sxx = np.einsum("mk,mk->m", d[..., 0], d[..., 0])
-        syy = np.einsum("mk,mk->m", d[..., 1], d[..., 1])
-        sxy = np.einsum("mk,mk->m", d[..., 0], d[..., 1])
-        # Direction of least spread of a 2x2 covariance: angle of the major axis plus 90 deg.
-        major = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
-        normals = np.column_stack([-np.sin(major), np.cos(major)])
-        self._ref = (tree, pts, normals)
+        self._ref = surface_reference(self._hit_sum[cells] / self._hit_count[cells][:, None])
         self._ref_scan = self.scans
         return self._ref
 
@@ -356,65 +364,23 @@ class GridMapper:
         body, _ = self._body_points(ranges)
         if ref is None or len(body) < 3:
             return MatchResult(guess, False, 0.0, float("nan"), 0)
-        tree, ref_pts, normals = ref
         if len(body) > cfg.match_points:
             body = body[np.linspace(0, len(body) - 1, cfg.match_points).round().astype(int)]
-        pose = guess.copy()
-        inlier_share, rms, it = 0.0, float("nan"), 0
-        eye3 = np.eye(3)
-        for it in range(1, cfg.match_iterations + 1):
-            # The gate halves each iteration down to its floor: wide first to pull in a poor
-            # guess, narrow later so that other surfaces do not bias the fit.
-            gate = max(cfg.match_min_dist_m, cfg.match_max_dist_m * 0.5 ** (it - 1))
-            c, s = np.cos(pose[2]), np.sin(pose[2])
-            px = pose[0] + c * body[:, 0] - s * body[:, 1]
-            py = pose[1] + s * body[:, 0] + c * body[:, 1]
-            dist, j = tree.query(np.column_stack([px, py]), distance_upper_bound=gate)
-            ok = dist < np.inf
-            n_ok = int(ok.sum())
-            inlier_share = n_ok / len(body)
-            if n_ok < 3:
-                break
-            jo = j[ok]
-            nx, ny = normals[jo, 0], normals[jo, 1]
-            ex, ey = px[ok] - pose[0], py[ok] - pose[1]  # lever arm: d p / d theta = (-ey, ex)
-            res = nx * (px[ok] - ref_pts[jo, 0]) + ny * (py[ok] - ref_pts[jo, 1])
-            jac = np.column_stack([nx, ny, nx * -ey + ny * ex])
-            lam = cfg.match_prior_weight * n_ok
-            prior = pose - guess
-            prior[2] = wrap_angle(prior[2])
-            hess = jac.T @ jac
-            step = np.linalg.solve(hess + lam * eye3, -(jac.T @ res) - lam * prior)
-            new = pose + step
-            # Degeneracy (Zhang, Kaess and Singh 2016): along a direction the scan hardly
-            # constrains -- the length of a wall, when it is all that is in range -- noise in
-            # the normals would move the pose at random, scan after scan. Keep the odometry
-            # guess there instead.
-            evals, evecs = np.linalg.eigh(hess)
-            weak = evals < cfg.match_degenerate_ratio * max(evals[-1], 1e-12)
-            if weak.any():
-                dev = new - guess
-                dev[2] = wrap_angle(dev[2])
-                coeff = evecs.T @ dev
-                coeff[weak] = 0.0
-                new = guess + evecs @ coeff
-                step = new - pose
-                step[2] = wrap_angle(step[2])
-            pose = new
-            pose[2] = wrap_angle(pose[2])
-            rms = float(np.sqrt(np.mean(res * res)))
-            small = abs(step[0]) + abs(step[1]) < MATCH_CONVERGED_M and abs(step[2]) < (
-                MATCH_CONVERGED_RAD
-            )
-            if small and gate <= cfg.match_min_dist_m:
-                break
-        corr = pose - guess
+        fit = icp_point_to_line(body, guess, ref, cfg)
+        corr = fit.pose - guess
         accepted = (
-            inlier_share >= cfg.match_min_inliers
+            fit.inlier_share >= cfg.match_min_inliers
             and np.hypot(corr[0], corr[1]) <= cfg.match_max_correction_m
             and abs(wrap_angle(corr[2])) <= cfg.match_max_correction_rad
         )
-        return MatchResult(pose if accepted else guess, bool(accepted), inlier_share, rms, it)
+        return MatchResult(
+            fit.pose if accepted else guess,
+            bool(accepted),
+            fit.inlier_share,
+            fit.rms_m,
+            fit.iterations,
+            fit.hessian,
+        )
 
     def update(
         self,

@@ -7,8 +7,8 @@ loop-closure edges between a keyframe and an older one it matched; the optimizat
 drift accumulated around a loop over the whole loop. The residual of an edge ``i -> j`` with
 measurement ``z`` (``j`` in ``i``'s frame) is ``[R_i^T (t_j - t_i) - z_xy, wrap(th_j - th_i -
 z_th)]``, weighted by the square root of the edge's information matrix; its Jacobian is
-analytic and sparse, and :func:`scipy.optimize.least_squares` (trust-region reflective with a
-sparse LSQR inner solver) does the rest. The first node is held fixed (the gauge).
+analytic and sparse; Levenberg-Marquardt with a sparse direct solve of the normal equations
+(:func:`scipy.sparse.linalg.spsolve`) does the rest. The first node is held fixed (the gauge).
 
 >>> g = PoseGraph()
 >>> for k in range(4):  # a square loop of 1 m sides whose odometry over-turns by 0.05 rad
@@ -27,8 +27,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import csr_matrix
+from scipy.sparse import csr_matrix, diags
+from scipy.sparse.linalg import spsolve
 
 from swarmpark.core.geometry import wrap_angle
 
@@ -158,7 +158,16 @@ class PoseGraph:
 
     def optimize(self, *, max_iterations: int = 50, tolerance: float = 1e-8) -> dict:
         """Optimize every pose but the first; returns ``{"iterations", "cost_before",
-        "cost_after", "edges", "loop_edges"}``."""
+        "cost_after", "edges", "loop_edges"}``.
+
+        Levenberg-Marquardt on the normal equations ``(J^T J + mu D) dx = -J^T r``, solved by
+        a sparse direct factorization (``J^T J`` of a pose graph is banded plus a few loop
+        entries, so each step costs little more than the residuals). scipy's
+        ``least_squares`` with its iterative LSMR inner solver took 50 evaluations (5 s) on a
+        500-keyframe graph with 600 loop edges without converging; this takes a handful.
+        ``iterations`` counts the evaluated steps; it stops when a step changes the cost by less
+        than ``tolerance`` (relative) or after ``max_iterations``.
+        """
         x0 = self.poses.ravel()
         if not self.edges or len(x0) <= 3:
             return {
@@ -175,33 +184,39 @@ class PoseGraph:
             np.array([e.sqrt_info for e in self.edges]),
         )
         anchor = x0[:3].copy()
-
-        def fun(free):
-            return self._residuals(np.concatenate([anchor, free]), idx)
-
-        def jac(free):
-            return self._jacobian(np.concatenate([anchor, free]), idx)
-
-        before = 0.5 * float(np.sum(fun(x0[3:]) ** 2))
-        sol = least_squares(
-            fun,
-            x0[3:],
-            jac=jac,
-            method="trf",
-            tr_solver="lsmr",
-            x_scale="jac",
-            max_nfev=max_iterations,
-            ftol=tolerance,
-            xtol=tolerance,
-            gtol=tolerance,
-        )
-        out = np.concatenate([anchor, sol.x]).reshape(-1, 3)
+        free = x0[3:].copy()
+        r = self._residuals(np.concatenate([anchor, free]), idx)
+        cost = before = 0.5 * float(r @ r)
+        mu, it = 1e-4, 0
+        while it < max_iterations:
+            it += 1
+            jac = self._jacobian(np.concatenate([anchor, free]), idx).tocsc()
+            h = (jac.T @ jac).tocsc()
+            g = jac.T @ r
+            diag = h.diagonal()
+            while True:
+                step = spsolve(h + diags(mu * np.maximum(diag, 1e-9)), -g)
+                trial = free + step
+                r_new = self._residuals(np.concatenate([anchor, trial]), idx)
+                new_cost = 0.5 * float(r_new @ r_new)
+                if np.isfinite(new_cost) and new_cost <= cost:
+                    break
+                mu *= 10.0
+                if mu > 1e12:
+                    step, new_cost, r_new, trial = 0 * step, cost, r, free
+                    break
+            done = cost - new_cost <= tolerance * max(cost, 1e-30)
+            free, r, cost = trial, r_new, new_cost
+            mu = max(mu / 10.0, 1e-12)
+            if done:
+                break
+        out = np.concatenate([anchor, free]).reshape(-1, 3)
         out[:, 2] = wrap_angle(out[:, 2])
         self._poses = list(out)
         return {
-            "iterations": int(sol.nfev),
+            "iterations": it,
             "cost_before": before,
-            "cost_after": float(sol.cost),
+            "cost_after": cost,
             "edges": len(self.edges),
             "loop_edges": sum(e.loop for e in self.edges),
         }
