@@ -74,7 +74,8 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from swarmpark.core.geometry import TOUCH_TOLERANCE_M
+from swarmpark.control.orca import lp, pairs, safety
+from swarmpark.control.orca.pairs import MIN_EDGE_M
 
 __all__ = [
     "OrcaParams",
@@ -98,16 +99,8 @@ __all__ = [
     "unicycle_to_holonomic",
 ]
 
-#: Determinants below this are "parallel lines" in the linear programs (RVO2's RVO_EPSILON).
-LP_EPSILON = 1e-9
-#: Edges shorter than this (metres) are padding or round-off, not edges.
-MIN_EDGE_M = 1e-12
-#: Times the safety filter halves a velocity before it stops the robot.
-SAFETY_HALVINGS = 4
 #: Above this many edge pairs, the Minkowski merge sorts instead of counting ranks.
 SMALL_MERGE = 64
-#: Pairs per block in the vectorized kernels (``(V, block)`` arrays that fit in cache).
-PAIR_CHUNK = 4096
 #: Sides of the regular polygon that covers a person's disc (circumscribed: conservative).
 DEFAULT_DISC_SIDES = 8
 #: Half-width (m/s) of the band a robot held on its axis may leave it by (round-off room).
@@ -441,106 +434,6 @@ def minkowski_difference(b: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.stack([mx.T, my.T], -1)
 
 
-def _vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference=0.0, keep_right=0.0):
-    """Shortest move ``u`` from the relative velocity to the boundary of the velocity
-    obstacle, and the obstacle's outward normal ``n`` there (see :func:`pair_halfplanes`).
-
-    Vertex-major layout: ``rx, ry`` ``(V, P)`` region vertices, ``wx, wy`` ``(P,)``.
-    Returns ``ux, uy, nx, ny`` ``(P,)``.
-    """
-    cols = np.arange(rx.shape[1])
-    ex, ey = _edges(rx), _edges(ry)
-    elen = np.sqrt(ex * ex + ey * ey)
-    real = elen > MIN_EDGE_M
-    inv_len = 1.0 / np.maximum(elen, MIN_EDGE_M)
-    # Outward normal of a counter-clockwise polygon: the right-hand perpendicular of the edge.
-    nx, ny = ey * inv_len, -ex * inv_len
-    front = real & (nx * rx + ny * ry < 0.0)  # the origin lies outside this edge's line
-    colliding = ~np.any(front, axis=0)
-
-    inv = np.where(colliding, inv_dt, inv_horizon)
-    # The cut-off polygon: region / tau, or region / dt when the shapes overlap now.
-    qx, qy = rx * inv, ry * inv
-    esx, esy = ex * inv, ey * inv
-
-    # Legs of the cone: rays from the origin through the extreme vertices seen from it.
-    cx, cy = rx.sum(axis=0), ry.sum(axis=0)  # a multiple of the centroid: same directions
-    key = _pseudo_angle(cx * rx + cy * ry, cx * ry - cy * rx)
-    # Angles relative to the centroid lie in (-pi, pi): shift so that the order is monotone.
-    key = np.where(key >= 2.0, key - 4.0, key)
-    kl, kr = _arg_extreme(key, True), _arg_extreme(key, False)
-    lx, ly, gx, gy = rx[kl, cols], ry[kl, cols], rx[kr, cols], ry[kr, cols]
-    ll = 1.0 / np.maximum(np.sqrt(lx * lx + ly * ly), MIN_EDGE_M)
-    gl = 1.0 / np.maximum(np.sqrt(gx * gx + gy * gy), MIN_EDGE_M)
-    lux, luy, gux, guy = lx * ll, ly * ll, gx * gl, gy * gl
-
-    # Facets: edges facing the origin and both legs (no collision) or all edges (collision).
-    # The largest signed distance tells inside from outside.
-    dxw, dyw = wx - qx, wy - qy
-    s_edge = np.where(real & (colliding | front), nx * dxw + ny * dyw, -np.inf)
-    k_edge = _arg_extreme(s_edge, True)
-    s_in = s_edge[k_edge, cols]
-    nix, niy = nx[k_edge, cols], ny[k_edge, cols]
-    s_left = np.where(colliding, -np.inf, -luy * wx + lux * wy)
-    s_right = np.where(colliding, -np.inf, guy * wx - gux * wy)
-    # Near-ties go to the right leg: both robots keep right (the pair's obstacles are point
-    # reflections of each other, which keeps handedness). Without the margin a nearly
-    # symmetric encounter flips sides with every small turn (the reciprocal dance).
-    speed = np.sqrt(wx * wx + wy * wy)
-    right = s_right + keep_right * speed >= s_left
-    s_leg = np.where(right, s_right, s_left)
-    lnx, lny = np.where(right, guy, -luy), np.where(right, -gux, lux)
-    inside = np.maximum(s_in, s_leg) <= 0.0
-    # Inside, any facet line supports the obstacle, so any of them keeps the reciprocal
-    # guarantee. ORCA takes the nearest; a flat cut-off face (rectangles) then only ever
-    # brakes two robots meeting head-on. A leg within leg_preference * |w| of the face is
-    # taken instead, so that they start passing each other (as discs do by curvature).
-    take_leg = ~colliding & (s_leg + leg_preference * speed >= s_in)
-    s_in = np.where(take_leg, s_leg, s_in)
-    nix, niy = np.where(take_leg, lnx, nix), np.where(take_leg, lny, niy)
-
-    # Outside: project on the boundary pieces. Edges facing away lie inside the obstacle and
-    # are never closer than the boundary, so all edges can be tried.
-    t = np.clip((dxw * esx + dyw * esy) / np.maximum(esx * esx + esy * esy, 1e-300), 0.0, 1.0)
-    px, py = qx + t * esx, qy + t * esy
-    d2 = (wx - px) ** 2 + (wy - py) ** 2
-    k_out = _arg_extreme(d2, False)
-    best = d2[k_out, cols]
-    bx, by = px[k_out, cols], py[k_out, cols]
-    for ux_, uy_, sx_, sy_ in ((lux, luy, lx, ly), (gux, guy, gx, gy)):
-        ox, oy = sx_ * inv, sy_ * inv
-        tr = np.maximum((wx - ox) * ux_ + (wy - oy) * uy_, 0.0)
-        cxr, cyr = ox + tr * ux_, oy + tr * uy_
-        dr = (wx - cxr) ** 2 + (wy - cyr) ** 2
-        take = ~colliding & (dr < best)
-        best = np.where(take, dr, best)
-        bx, by = np.where(take, cxr, bx), np.where(take, cyr, by)
-    awx, awy = wx - bx, wy - by
-    dist = np.sqrt(awx * awx + awy * awy)
-    # A tangent-point normal is ill-defined for a relative velocity on the boundary itself:
-    # then the facet normal found above is the outward normal.
-    far = dist > 1e-12
-    inv_d = 1.0 / np.maximum(dist, 1e-12)
-    nox, noy = np.where(far, awx * inv_d, nix), np.where(far, awy * inv_d, niy)
-
-    ux = np.where(inside, -s_in * nix, bx - wx)
-    uy = np.where(inside, -s_in * niy, by - wy)
-    return ux, uy, np.where(inside, nix, nox), np.where(inside, niy, noy), inside
-
-
-def _in_chunks(fn, n_out: int, size: int, vertex_major: tuple, per_pair: tuple, *extra):
-    """Call ``fn`` on blocks of pairs so the ``(V, block)`` temporaries stay in cache."""
-    if size <= PAIR_CHUNK:
-        return fn(*vertex_major, *per_pair, *extra)
-    outs = [[] for _ in range(n_out)]
-    for lo in range(0, size, PAIR_CHUNK):
-        sl = slice(lo, lo + PAIR_CHUNK)
-        res = fn(*(a[:, sl] for a in vertex_major), *(a[sl] for a in per_pair), *extra)
-        for k in range(n_out):
-            outs[k].append(res[k])
-    return tuple(np.concatenate(o, axis=-1) for o in outs)
-
-
 def pair_halfplanes(
     region: np.ndarray,
     rel_velocity: np.ndarray,
@@ -586,14 +479,15 @@ def pair_halfplanes(
     """
     q = np.asarray(region, dtype=float)
     w = np.asarray(rel_velocity, dtype=float)
-    ux, uy, nx, ny, inside = _vo_projection(
+    ux, uy, nx, ny, inside = pairs.vo_projection(
         np.ascontiguousarray(q[..., 0].T),
         np.ascontiguousarray(q[..., 1].T),
-        w[:, 0].copy(),
-        w[:, 1].copy(),
-        np.broadcast_to(np.asarray(inv_horizon, dtype=float), w.shape[:1]),
-        inv_dt,
-        leg_preference,
+        np.ascontiguousarray(w[:, 0]),
+        np.ascontiguousarray(w[:, 1]),
+        np.ascontiguousarray(np.broadcast_to(np.asarray(inv_horizon, dtype=float), w.shape[:1])),
+        float(inv_dt),
+        float(leg_preference),
+        0.0,
     )
     share = np.broadcast_to(np.asarray(share, dtype=float), inside.shape)
     if slack_share is not None:
@@ -630,104 +524,33 @@ def responsibility_shares(
 
 
 # --------------------------------------------------------------------------------------------
-# linear programs (RVO2's linearProgram1/2/3), vectorized across robots
+# linear programs (RVO2's linearProgram1/2/3), compiled in :mod:`.lp`
 
 
-def _lp1(point, direction, valid, i, rows, radius, opt, direction_opt):
-    """Best point on line ``i`` within the speed circle and lines ``< i``, for ``rows``."""
-    pi, di = point[rows, i], direction[rows, i]
-    dotp = _dot(pi, di)
-    disc = dotp * dotp + radius[rows] ** 2 - _dot(pi, pi)
-    ok = disc >= 0.0
-    sq = np.sqrt(np.maximum(disc, 0.0))
-    t_left, t_right = -dotp - sq, -dotp + sq
-    if i > 0:
-        pj, dj, vj = point[rows, :i], direction[rows, :i], valid[rows, :i]
-        denom = _det(di[:, None], dj)
-        numer = _det(dj, pi[:, None] - pj)
-        parallel = np.abs(denom) <= LP_EPSILON
-        # A parallel line that excludes all of line i makes it infeasible.
-        ok &= ~np.any(vj & parallel & (numer < 0.0), axis=1)
-        t = numer / np.where(parallel, 1.0, denom)
-        cut = vj & ~parallel
-        t_right = np.minimum(t_right, np.min(np.where(cut & (denom > 0), t, np.inf), axis=1))
-        t_left = np.maximum(t_left, np.max(np.where(cut & (denom < 0), t, -np.inf), axis=1))
-        ok &= t_left <= t_right
-    if direction_opt:
-        t = np.where(_dot(opt, di) > 0.0, t_right, t_left)
-    else:
-        t = np.clip(_dot(di, opt - pi), t_left, t_right)
-    return ok, pi + t[:, None] * di
+def _split_lines(point, direction):
+    """Contiguous ``x``/``y`` planes of ``(N, M, 2)`` line arrays, for the compiled programs."""
+    return (
+        np.ascontiguousarray(point[..., 0]),
+        np.ascontiguousarray(point[..., 1]),
+        np.ascontiguousarray(direction[..., 0]),
+        np.ascontiguousarray(direction[..., 1]),
+    )
 
 
-def _lp2(point, direction, valid, radius, opt, direction_opt):
-    """Velocity closest to ``opt`` (or farthest along it) in all lines and the speed circle.
-
-    Returns the result ``(n, 2)`` and the index of the first line that could not be met
-    (``M`` where all were met).
-    """
-    n, m = valid.shape
-    if direction_opt:
-        result = opt * radius[:, None]
-    else:
-        speed = np.linalg.norm(opt, axis=-1)
-        scale = np.where(speed > radius, radius / np.maximum(speed, 1e-300), 1.0)
-        result = opt * scale[:, None]
-    fail = np.full(n, m)
-    active = np.ones(n, dtype=bool)
-    for i in range(m):
-        viol = active & valid[:, i] & (_det(direction[:, i], point[:, i] - result) > 0.0)
-        rows = np.flatnonzero(viol)
-        if rows.size == 0:
-            continue
-        ok, res = _lp1(point, direction, valid, i, rows, radius, opt[rows], direction_opt)
-        result[rows[ok]] = res[ok]
-        bad = rows[~ok]
-        fail[bad] = i
-        active[bad] = False
+def _lp2(point, direction, valid, radius, opt):
+    """Velocities closest to ``opt`` in all lines and the speed circles, and the first
+    line each robot could not meet (``M`` where all were met)."""
+    result = np.empty((valid.shape[0], 2))
+    opt = np.asarray(opt, dtype=float)
+    fail = lp.solve_lp2(
+        *_split_lines(point, direction),
+        np.ascontiguousarray(valid),
+        np.ascontiguousarray(radius, dtype=float),
+        np.ascontiguousarray(opt[:, 0]),
+        np.ascontiguousarray(opt[:, 1]),
+        result,
+    )
     return result, fail
-
-
-def _lp3(point, direction, valid, n_hard, fail, radius, result):
-    """Where the half-planes are infeasible, minimise the largest violation of the soft ones
-    (the 3-D program of RVO2), keeping the hard ones. Updates ``result`` in place."""
-    m = valid.shape[1]
-    rows_all = np.flatnonzero(fail < m)
-    if rows_all.size == 0:
-        return
-    res = result[rows_all].copy()
-    distance = np.zeros(rows_all.size)
-    for i in range(int(fail[rows_all].min()), m):
-        pi_all, di_all = point[rows_all, i], direction[rows_all, i]
-        need = (fail[rows_all] <= i) & valid[rows_all, i] & (_det(di_all, pi_all - res) > distance)
-        sel = np.flatnonzero(need)
-        if sel.size == 0:
-            continue
-        r = rows_all[sel]
-        pi, di = point[r, i], direction[r, i]
-        lo = n_hard  # the hard lines always hold, as in RVO2
-        pj, dj = point[r, n_hard:i], direction[r, n_hard:i]
-        d_ij = _det(di[:, None], dj)
-        parallel = np.abs(d_ij) <= LP_EPSILON
-        same_way = parallel & (_dot(di[:, None], dj) > 0.0)
-        # Lines equidistant to line i and line j: where violating both is balanced.
-        cross_pt = (
-            pi[:, None]
-            + (_det(dj, pi[:, None] - pj) / np.where(parallel, 1.0, d_ij))[..., None] * di[:, None]
-        )
-        proj_p = np.where(parallel[..., None], 0.5 * (pi[:, None] + pj), cross_pt)
-        proj_d = dj - di[:, None]
-        proj_d = proj_d / np.maximum(np.linalg.norm(proj_d, axis=-1), 1e-300)[..., None]
-        pp = np.concatenate([point[r, :lo], proj_p], axis=1)
-        dd = np.concatenate([direction[r, :lo], proj_d], axis=1)
-        vv = np.concatenate([valid[r, :lo], valid[r, n_hard:i] & ~same_way], axis=1)
-        opt = np.stack([-di[:, 1], di[:, 0]], -1)
-        new, f2 = _lp2(pp, dd, vv, radius[r], opt, True)
-        # Failure here is float round-off only (the old result is feasible): keep the old one.
-        ok = f2 >= pp.shape[1]
-        res[sel] = np.where(ok[:, None], new, res[sel])
-        distance[sel] = _det(di, pi - res[sel])
-    result[rows_all] = res
 
 
 def solve_velocity_lp(
@@ -758,21 +581,24 @@ def solve_velocity_lp(
     >>> float(v[0, 0]), bool(bad[0])
     (0.0, True)
     """
-    pref = np.asarray(pref_velocities, dtype=float)
-    radius = np.asarray(max_speeds, dtype=float)
-    result, fail = _lp2(
-        halfplanes.point, halfplanes.direction, halfplanes.valid, radius, pref.copy(), False
+    pref = np.asarray(pref_velocities, dtype=float).reshape(-1, 2)
+    radius = np.ascontiguousarray(
+        np.broadcast_to(np.asarray(max_speeds, dtype=float), pref.shape[:1])
     )
-    infeasible = fail < halfplanes.valid.shape[1]
-    _lp3(
-        halfplanes.point,
-        halfplanes.direction,
-        halfplanes.valid,
-        halfplanes.n_hard,
-        fail,
+    lines = _split_lines(halfplanes.point, halfplanes.direction)
+    valid = np.ascontiguousarray(halfplanes.valid)
+    result = np.empty_like(pref)
+    fail = lp.solve_lp2(
+        *lines,
+        valid,
         radius,
+        np.ascontiguousarray(pref[:, 0]),
+        np.ascontiguousarray(pref[:, 1]),
         result,
     )
+    infeasible = fail < valid.shape[1]
+    if infeasible.any():
+        lp.solve_lp3(*lines, valid, int(halfplanes.n_hard), fail, radius, result)
     if slowest_fallback and infeasible.any():
         _slowest_least_violation(halfplanes, np.flatnonzero(infeasible), radius, result)
     return result, infeasible
@@ -789,7 +615,7 @@ def _slowest_least_violation(hp: HalfPlanes, rows, radius, result) -> None:
     slack = np.maximum(worst, 0.0) * (1.0 + 1e-9) + 1e-12
     left = np.stack([-d[..., 1], d[..., 0]], -1)
     relaxed = p - np.where(soft[None, :, None], slack[:, None, None] * left, 0.0)
-    new, fail = _lp2(relaxed, d, v, radius[rows], np.zeros((rows.size, 2)), False)
+    new, fail = _lp2(relaxed, d, v, radius[rows], np.zeros((rows.size, 2)))
     ok = fail >= v.shape[1]
     result[rows[ok]] = new[ok]
 
@@ -992,6 +818,17 @@ def prepare_obstacles(polygons: Sequence) -> StaticObstacles:
 # the step
 
 
+def _robot_regions(sx, sy, b, a, offset):
+    """Collision regions ``offset + shape[b] ⊕ -shape[a]`` of robot pairs, vertex-major
+    ``(2K, P)``: compiled for the usual few vertices, the numpy merge for many."""
+    if sx.shape[0] ** 2 <= SMALL_MERGE:
+        return pairs.minkowski_pairs(
+            sx, sy, b, a, np.ascontiguousarray(offset[:, 0]), np.ascontiguousarray(offset[:, 1])
+        )
+    rx, ry = _minkowski_xy(sx[:, b], sy[:, b], sx[:, a], sy[:, a])
+    return rx + offset[:, 0], ry + offset[:, 1]
+
+
 def _rank_in_group(group: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Order by (group, key) and the rank of each item within its group."""
     order = np.lexsort((key, group))
@@ -1012,37 +849,6 @@ def _scatter(n: int, m: int, rows, slots, point, direction):
     return p, d, v
 
 
-def _edge_planes(rx: np.ndarray, ry: np.ndarray):
-    """Edge lines of convex regions ``(V, P)``: unit outward normals ``n`` and offsets ``c``
-    (interior: ``n · x < c`` for every real edge), and the mask of real edges."""
-    ex, ey = _edges(rx), _edges(ry)
-    elen = np.sqrt(ex * ex + ey * ey)
-    real = elen > MIN_EDGE_M
-    inv_len = 1.0 / np.maximum(elen, MIN_EDGE_M)
-    nx, ny = ey * inv_len, -ex * inv_len
-    return nx, ny, nx * rx + ny * ry, real
-
-
-def _sweep(planes, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
-    """Whether ``t * (dx, dy)``, ``0 <= t <= 1``, enters the interior of the regions."""
-    nx, ny, c, real = planes
-    # Inside edge e at time t: t * (n_e . d) < c_e - tol (touching is not a hit).
-    a = nx * dx + ny * dy
-    b = c - TOUCH_TOLERANCE_M
-    flat = np.abs(a) <= 1e-15
-    blocked = np.any(real & flat & (b <= 0.0), axis=0)
-    ratio = b / np.where(flat, 1.0, a)
-    cut = real & ~flat
-    t_hi = np.minimum(1.0, np.min(np.where(cut & (a > 0), ratio, np.inf), axis=0))
-    t_lo = np.maximum(0.0, np.max(np.where(cut & (a < 0), ratio, -np.inf), axis=0))
-    return ~blocked & (t_lo < t_hi)
-
-
-def _inside_now(planes) -> np.ndarray:
-    nx, ny, c, real = planes
-    return ~np.any(real & (c - TOUCH_TOLERANCE_M <= 0.0), axis=0)
-
-
 def sweep_hits(region: np.ndarray, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Whether the straight path ``t * displacement`` (``0 <= t <= 1``) enters the interior
     of convex ``region`` ``(P, V, 2)``, and whether it starts inside.
@@ -1060,40 +866,13 @@ def sweep_hits(region: np.ndarray, displacement: np.ndarray) -> tuple[np.ndarray
     """
     q = np.asarray(region, dtype=float)
     disp = np.asarray(displacement, dtype=float)
-    planes = _edge_planes(np.ascontiguousarray(q[..., 0].T), np.ascontiguousarray(q[..., 1].T))
-    return _sweep(planes, disp[:, 0], disp[:, 1]), _inside_now(planes)
-
-
-def _safety_filter(vel, dt, robot_pairs, obstacle_pairs):
-    """Slow robots whose straight one-step motions overlap (see ``OrcaParams.safety_filter``).
-
-    ``robot_pairs`` is ``(i, j, rx, ry)`` for every pair that can meet within one step
-    (regions in vertex-major layout) and ``obstacle_pairs`` ``(i, rx, ry)``. Scales only go
-    down and a stopped pair that does not overlap now is safe, so the loop ends; pairs that
-    overlap already are left to ORCA's separating constraints.
-    """
-    n = vel.shape[0]
-    i, j, rx, ry = robot_pairs
-    io, ox, oy = obstacle_pairs
-    planes, o_planes = _edge_planes(rx, ry), _edge_planes(ox, oy)
-    free, o_free = ~_inside_now(planes), ~_inside_now(o_planes)
-    scale = np.ones(n)
-    halvings = 0
-    while True:
-        v = vel * scale[:, None]
-        d = (v[i] - v[j]) * dt
-        hit = _sweep(planes, d[:, 0], d[:, 1]) & free
-        o_hit = _sweep(o_planes, v[io, 0] * dt, v[io, 1] * dt) & o_free
-        bad = np.zeros(n, dtype=bool)
-        bad[i[hit]] = True
-        bad[j[hit]] = True
-        bad[io[o_hit]] = True
-        bad &= scale > 0
-        if not bad.any():
-            break
-        halvings += 1
-        scale[bad] = 0.5 * scale[bad] if halvings <= SAFETY_HALVINGS else 0.0
-    return vel * scale[:, None], scale < 1.0
+    nx, ny, c, real = safety.edge_planes(
+        np.ascontiguousarray(q[..., 0].T), np.ascontiguousarray(q[..., 1].T)
+    )
+    hit = safety.sweep(
+        nx, ny, c, real, np.ascontiguousarray(disp[:, 0]), np.ascontiguousarray(disp[:, 1])
+    )
+    return hit, safety.inside_now(c, real)
 
 
 def orca_step(
@@ -1306,11 +1085,7 @@ def orca_step(
             lo, hi = np.where(swap, hi, lo), np.where(swap, lo, hi)
             # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
             sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
-            rx, ry = _in_chunks(
-                _minkowski_xy, 2, lo.size, (sx[:, hi], sy[:, hi], sx[:, lo], sy[:, lo]), ()
-            )
-            rx += pos[hi, 0] - pos[lo, 0]
-            ry += pos[hi, 1] - pos[lo, 1]
+            rx, ry = _robot_regions(sx, sy, hi, lo, pos[hi] - pos[lo])
             if params.safety_filter:
                 f_idx = np.unique(inverse[n_orca:])
                 robot_pairs = (lo[f_idx], hi[f_idx], rx[:, f_idx], ry[:, f_idx])
@@ -1318,19 +1093,15 @@ def orca_step(
                 used, pair_of = np.unique(inverse[:n_orca], return_inverse=True)
                 a, b = lo[used], hi[used]
                 rel_opt = vel[a] - vel[b]
-                ux, uy, nx, ny, inside = _in_chunks(
-                    _vo_projection,
-                    5,
-                    used.size,
-                    (rx[:, used], ry[:, used]),
-                    (
-                        rel_opt[:, 0],
-                        rel_opt[:, 1],
-                        np.full(used.size, 1.0 / params.time_horizon_s),
-                    ),
-                    inv_dt,
-                    params.leg_preference,
-                    params.keep_right,
+                ux, uy, nx, ny, inside = pairs.vo_projection(
+                    rx[:, used],
+                    ry[:, used],
+                    np.ascontiguousarray(rel_opt[:, 0]),
+                    np.ascontiguousarray(rel_opt[:, 1]),
+                    np.full(used.size, 1.0 / params.time_horizon_s),
+                    float(inv_dt),
+                    float(params.leg_preference),
+                    float(params.keep_right),
                 )
                 sign = np.where(rows == a[pair_of], 1.0, -1.0)
                 share = responsibility_shares(prio[rows], prio[nb], params.min_share)
@@ -1370,5 +1141,5 @@ def orca_step(
     if params.safety_filter and n:
         if obstacle_pairs is None:
             obstacle_pairs = (np.zeros(0, int), np.zeros((3, 0)), np.zeros((3, 0)))
-        out, slowed = _safety_filter(out, dt_s, robot_pairs, obstacle_pairs)
+        out, slowed = safety.safety_filter(out, float(dt_s), *robot_pairs, *obstacle_pairs)
     return OrcaResult(velocities=out, infeasible=infeasible, halfplanes=halfplanes, slowed=slowed)
