@@ -287,17 +287,8 @@ def _check_convex_ccw(polys: np.ndarray, name: str) -> None:
     """Raise if any polygon ``(N, K, 2)`` is not convex with counter-clockwise vertices."""
     if polys.shape[0] == 0:
         return
-    e = np.roll(polys, -1, axis=1) - polys
-    real = np.linalg.norm(e, axis=-1) > MIN_EDGE_M
-    # Turn between consecutive non-zero edges; padded (repeated) vertices give zero edges.
-    e_next = np.roll(e, -1, axis=1)
-    cross = _det(e, e_next)
-    scale = np.linalg.norm(e, axis=-1) * np.linalg.norm(e_next, axis=-1)
-    bad_turn = real & np.roll(real, -1, axis=1) & (cross < -1e-9 * np.maximum(scale, 1e-30))
-    area2 = _det(polys, np.roll(polys, -1, axis=1)).sum(axis=1)
-    bad = bad_turn.any(axis=1) | (area2 < 0)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
+    i = pairs.first_not_convex_ccw(np.ascontiguousarray(polys, dtype=float))
+    if i >= 0:
         raise ValueError(
             f"{name}[{i}]: not a convex polygon with counter-clockwise vertices: "
             f"{polys[i].tolist()}"
@@ -582,14 +573,28 @@ def solve_velocity_lp(
     (0.0, True)
     """
     pref = np.asarray(pref_velocities, dtype=float).reshape(-1, 2)
-    radius = np.ascontiguousarray(
-        np.broadcast_to(np.asarray(max_speeds, dtype=float), pref.shape[:1])
+    radius = np.broadcast_to(np.asarray(max_speeds, dtype=float), pref.shape[:1])
+    return _solve(
+        *_split_lines(halfplanes.point, halfplanes.direction),
+        halfplanes.valid,
+        halfplanes.n_hard,
+        pref,
+        radius,
+        slowest_fallback,
     )
-    lines = _split_lines(halfplanes.point, halfplanes.direction)
-    valid = np.ascontiguousarray(halfplanes.valid)
-    result = np.empty_like(pref)
+
+
+def _solve(px, py, dx, dy, valid, n_hard, pref, radius, slowest_fallback):
+    """:func:`solve_velocity_lp` on lines given as ``(N, M)`` coordinate planes."""
+    px, py, dx, dy = (np.ascontiguousarray(a, dtype=float) for a in (px, py, dx, dy))
+    valid = np.ascontiguousarray(valid, dtype=bool)
+    radius = np.ascontiguousarray(radius, dtype=float)
+    result = np.empty((valid.shape[0], 2))
     fail = lp.solve_lp2(
-        *lines,
+        px,
+        py,
+        dx,
+        dy,
         valid,
         radius,
         np.ascontiguousarray(pref[:, 0]),
@@ -598,9 +603,10 @@ def solve_velocity_lp(
     )
     infeasible = fail < valid.shape[1]
     if infeasible.any():
-        lp.solve_lp3(*lines, valid, int(halfplanes.n_hard), fail, radius, result)
+        lp.solve_lp3(px, py, dx, dy, valid, int(n_hard), fail, radius, result)
     if slowest_fallback and infeasible.any():
-        _slowest_least_violation(halfplanes, np.flatnonzero(infeasible), radius, result)
+        hp = HalfPlanes(np.stack([px, py], -1), np.stack([dx, dy], -1), valid, n_hard)
+        _slowest_least_violation(hp, np.flatnonzero(infeasible), radius, result)
     return result, infeasible
 
 
@@ -818,17 +824,6 @@ def prepare_obstacles(polygons: Sequence) -> StaticObstacles:
 # the step
 
 
-def _robot_regions(sx, sy, b, a, offset):
-    """Collision regions ``offset + shape[b] ⊕ -shape[a]`` of robot pairs, vertex-major
-    ``(2K, P)``: compiled for the usual few vertices, the numpy merge for many."""
-    if sx.shape[0] ** 2 <= SMALL_MERGE:
-        return pairs.minkowski_pairs(
-            sx, sy, b, a, np.ascontiguousarray(offset[:, 0]), np.ascontiguousarray(offset[:, 1])
-        )
-    rx, ry = _minkowski_xy(sx[:, b], sy[:, b], sx[:, a], sy[:, a])
-    return rx + offset[:, 0], ry + offset[:, 1]
-
-
 def _rank_in_group(group: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Order by (group, key) and the rank of each item within its group."""
     order = np.lexsort((key, group))
@@ -838,15 +833,13 @@ def _rank_in_group(group: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _scatter(n: int, m: int, rows, slots, point, direction):
-    """Pack pair constraints into per-robot slots ``(n, m)``."""
-    p = np.zeros((n, m, 2))
-    d = np.zeros((n, m, 2))
-    d[..., 0] = 1.0
+    """Pack pair constraints into per-robot slots: ``px, py, dx, dy, valid``, ``(n, m)``."""
+    px, py, dx, dy = np.zeros((n, m)), np.zeros((n, m)), np.ones((n, m)), np.zeros((n, m))
     v = np.zeros((n, m), dtype=bool)
-    p[rows, slots] = point
-    d[rows, slots] = direction
+    px[rows, slots], py[rows, slots] = point[:, 0], point[:, 1]
+    dx[rows, slots], dy[rows, slots] = direction[:, 0], direction[:, 1]
     v[rows, slots] = True
-    return p, d, v
+    return px, py, dx, dy, v
 
 
 def sweep_hits(region: np.ndarray, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -965,7 +958,7 @@ def orca_step(
         pt = np.stack([-nrm, nrm], 1)
         dr = np.stack([ax, -ax], 1)
         valid = np.repeat(on[:, None], 2, axis=1)
-        blocks.append((pt, dr, valid))
+        blocks.append((pt[..., 0], pt[..., 1], dr[..., 0], dr[..., 1], valid))
         n_hard = 2
     # Static obstacles: hard constraints, full share, their own horizon.
     obstacle_pairs = None
@@ -1041,105 +1034,77 @@ def orca_step(
                 )
                 blocks.append(_scatter(n, k, rows, slots, pt, dr))
 
-    # Other robots: reciprocal, shares by priority. Each unordered pair is built once: the
-    # obstacle of j seen from i is the point reflection of that of i seen from j.
-    robot_pairs = (np.zeros(0, int), np.zeros(0, int), np.zeros((3, 0)), np.zeros((3, 0)))
+    # Other robots: reciprocal, shares by priority (compiled, :func:`.pairs.robot_lines`).
+    robot_pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
     if n > 1:
-        keys = []
-        rows = nb = slots = np.zeros(0, int)
-        m_agents = 0
+        tree = cKDTree(pos)
+        # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
+        sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
         if params.max_neighbours:
             cut = params.neighbour_dist_m
             if cut is None:
                 top = np.sort(speed)[-2:].sum()
                 cut = params.time_horizon_s * top + np.sort(reach)[-2:].sum()
             k = min(params.max_neighbours + 1, n)
-            dist, idx = cKDTree(pos).query(pos, k=k, distance_upper_bound=cut)
-            ok = (idx < n) & (idx != np.arange(n)[:, None])
-            safe = np.where(ok, idx, 0)
-            rel = pos[safe] - pos[:, None]
-            # Nearest first; exact distance ties broken by geometry, not by robot index.
-            key_d = np.where(ok, dist, np.inf)
-            order = np.lexsort((rel[..., 1], rel[..., 0], key_d), axis=-1)
-            order = order[:, : params.max_neighbours]
-            ok = np.take_along_axis(ok, order, axis=1)
-            safe = np.take_along_axis(safe, order, axis=1)
-            m_agents = order.shape[1]
-            rows, slots = np.nonzero(ok)
-            nb = safe[rows, slots]
-            keys.append(np.minimum(rows, nb) * n + np.maximum(rows, nb))
-        n_orca = sum(len(x) for x in keys)
+            dist, idx = tree.query(pos, k=k, distance_upper_bound=cut)
+            lines = pairs.robot_lines(
+                pos,
+                vel,
+                prio,
+                still,
+                idx.reshape(n, k).astype(np.int64, copy=False),
+                dist.reshape(n, k),
+                sx,
+                sy,
+                int(params.max_neighbours),
+                1.0 / params.time_horizon_s,
+                float(inv_dt),
+                float(params.leg_preference),
+                float(params.keep_right),
+                float(params.min_share),
+            )
+            if lines[4].any():
+                blocks.append(lines)
         if params.safety_filter:
             # Pairs that can touch within one step at the speed limits.
             near = 2.0 * reach.max() + 2.0 * vmax.max() * dt_s
-            fp = cKDTree(pos).query_pairs(near, output_type="ndarray")
-            keys.append(fp[:, 0].astype(np.int64) * n + fp[:, 1])
-        if keys and sum(len(x) for x in keys):
-            uniq, inverse = np.unique(np.concatenate(keys), return_inverse=True)
-            lo, hi = uniq // n, uniq % n
-            # Build each pair from the side of the robot with the smaller (x, y), not the
-            # smaller index, so that the floats do not depend on the robots' order.
-            swap = (pos[hi, 0] < pos[lo, 0]) | (
-                (pos[hi, 0] == pos[lo, 0]) & (pos[hi, 1] < pos[lo, 1])
+            fp = tree.query_pairs(near, output_type="ndarray").astype(np.int64)
+            lo, hi = pairs.canonical_pairs(pos, fp[:, 0].copy(), fp[:, 1].copy())
+            rx, ry = pairs.minkowski_pairs(
+                sx, sy, hi, lo, pos[hi, 0] - pos[lo, 0], pos[hi, 1] - pos[lo, 1]
             )
-            lo, hi = np.where(swap, hi, lo), np.where(swap, lo, hi)
-            # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
-            sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
-            rx, ry = _robot_regions(sx, sy, hi, lo, pos[hi] - pos[lo])
-            if params.safety_filter:
-                f_idx = np.unique(inverse[n_orca:])
-                robot_pairs = (lo[f_idx], hi[f_idx], rx[:, f_idx], ry[:, f_idx])
-            if rows.size:
-                used, pair_of = np.unique(inverse[:n_orca], return_inverse=True)
-                a, b = lo[used], hi[used]
-                rel_opt = vel[a] - vel[b]
-                ux, uy, nx, ny, inside = pairs.vo_projection(
-                    rx[:, used],
-                    ry[:, used],
-                    np.ascontiguousarray(rel_opt[:, 0]),
-                    np.ascontiguousarray(rel_opt[:, 1]),
-                    np.full(used.size, 1.0 / params.time_horizon_s),
-                    float(inv_dt),
-                    float(params.leg_preference),
-                    float(params.keep_right),
-                )
-                sign = np.where(rows == a[pair_of], 1.0, -1.0)
-                share = responsibility_shares(prio[rows], prio[nb], params.min_share)
-                # Outside the obstacle u is room to approach: the higher priority gets the
-                # larger part of it (the complement still sums to one over the pair).
-                share = np.where(inside[pair_of], share, 1.0 - share)
-                # Against a robot that will not move, all of it is ours, either way.
-                share = np.where(still[nb], 1.0, share)
-                pt, dr = _lines(
-                    vel[rows],
-                    share,
-                    sign * ux[pair_of],
-                    sign * uy[pair_of],
-                    sign * nx[pair_of],
-                    sign * ny[pair_of],
-                )
-                blocks.append(_scatter(n, m_agents, rows, slots, pt, dr))
+            robot_pairs = (lo, hi, rx, ry)
 
     if blocks:
-        point = np.concatenate([b[0] for b in blocks], axis=1)
-        direction = np.concatenate([b[1] for b in blocks], axis=1)
-        valid = np.concatenate([b[2] for b in blocks], axis=1)
+        px, py, dx, dy, valid = (np.concatenate([b[f] for b in blocks], axis=1) for f in range(5))
     else:
-        point, direction = np.zeros((n, 0, 2)), np.zeros((n, 0, 2))
+        px, py, dx, dy = (np.zeros((n, 0)) for _ in range(4))
+        dx = np.ones((n, 0))
         valid = np.zeros((n, 0), dtype=bool)
-    halfplanes = HalfPlanes(point=point, direction=direction, valid=valid, n_hard=n_hard)
+    halfplanes = HalfPlanes(
+        point=np.stack([px, py], -1), direction=np.stack([dx, dy], -1), valid=valid, n_hard=n_hard
+    )
 
     out = np.zeros((n, 2))
     infeasible = np.zeros(n, dtype=bool)
     move = np.flatnonzero(~still)
-    if move.size:
-        sub = HalfPlanes(point[move], direction[move], valid[move], n_hard)
-        out[move], infeasible[move] = solve_velocity_lp(
-            sub, pref[move], vmax[move], slowest_fallback=params.slowest_fallback
+    if move.size == n:
+        out, infeasible = _solve(px, py, dx, dy, valid, n_hard, pref, vmax, params.slowest_fallback)
+    elif move.size:
+        out[move], infeasible[move] = _solve(
+            px[move],
+            py[move],
+            dx[move],
+            dy[move],
+            valid[move],
+            n_hard,
+            pref[move],
+            vmax[move],
+            params.slowest_fallback,
         )
     slowed = np.zeros(n, dtype=bool)
     if params.safety_filter and n:
         if obstacle_pairs is None:
-            obstacle_pairs = (np.zeros(0, int), np.zeros((3, 0)), np.zeros((3, 0)))
+            obstacle_pairs = (np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
         out, slowed = safety.safety_filter(out, float(dt_s), *robot_pairs, *obstacle_pairs)
     return OrcaResult(velocities=out, infeasible=infeasible, halfplanes=halfplanes, slowed=slowed)

@@ -70,55 +70,79 @@ def _own_rank(ang, finite, rank):
 
 
 @njit(cache=True)
+def _scratch(k):
+    """Work arrays of one Minkowski merge of two ``k``-gons."""
+    return (
+        np.empty(k),
+        np.empty(k),
+        np.empty(k),  # edges and angles of B
+        np.empty(k),
+        np.empty(k),
+        np.empty(k),  # of -A
+        np.empty(k, np.int64),
+        np.empty(k, np.int64),  # own ranks
+        np.empty(2 * k),
+        np.empty(2 * k),  # merged edges
+        np.empty((k, 1)),
+        np.empty((k, 1)),  # -A
+    )
+
+
+@njit(cache=True)
+def _minkowski_one(sx, sy, b, a, off_x, off_y, out_x, out_y, col, scr):
+    """Column ``col`` of ``out``: ``off + shape[b] ⊕ -shape[a]`` (shapes ``(K, N)``).
+
+    Each edge's place in the merged walk is its rank in its own polygon plus the number of
+    the other polygon's edges before it (equal angles: the edge of B first).
+    """
+    ebx, eby, ang_b, eax, eay, ang_a, rank_b, rank_a, ex, ey, nax, nay = scr
+    k = sx.shape[0]
+    for v in range(k):
+        nax[v, 0] = -sx[v, a]  # a point reflection keeps counter-clockwise order
+        nay[v, 0] = -sy[v, a]
+    fin_b = _edge_angles(sx, sy, b, ebx, eby, ang_b)
+    fin_a = _edge_angles(nax, nay, 0, eax, eay, ang_a)
+    first_b = _own_rank(ang_b, fin_b, rank_b)
+    first_a = _own_rank(ang_a, fin_a, rank_a)
+    for kb in range(k):
+        pos_b = rank_b[kb]
+        for m in range(k):
+            if ang_a[m] < ang_b[kb]:
+                pos_b += 1
+        ex[pos_b], ey[pos_b] = ebx[kb], eby[kb]
+    for m in range(k):
+        pos_a = rank_a[m]
+        for kb in range(k):
+            if not (ang_a[m] < ang_b[kb]):
+                pos_a += 1
+        ex[pos_a], ey[pos_a] = eax[m], eay[m]
+    # The walk starts at the sum of the tails of both polygons' first edges.
+    x0 = sx[first_b, b] + nax[first_a, 0]
+    y0 = sy[first_b, b] + nay[first_a, 0]
+    out_x[0, col] = x0 + off_x
+    out_y[0, col] = y0 + off_y
+    cx, cy = ex[0], ey[0]
+    for v in range(1, 2 * k):
+        out_x[v, col] = (x0 + cx) + off_x
+        out_y[v, col] = (y0 + cy) + off_y
+        cx += ex[v]
+        cy += ey[v]
+
+
+@njit(cache=True)
 def minkowski_pairs(sx, sy, b_idx, a_idx, off_x, off_y):
     """Regions ``off + shape[b] ⊕ -shape[a]`` for pairs: ``(K + K, P)`` x and y.
 
     ``sx, sy`` are ``(K, N)`` vertex-major shapes, ``b_idx, a_idx`` ``(P,)`` robot indices
     and ``off_x, off_y`` ``(P,)`` offsets added to every vertex (the relative position).
-    Each edge's place in the merged walk is its rank in its own polygon plus the number of
-    the other polygon's edges before it (equal angles: the edge of B first).
     """
     k = sx.shape[0]
     n_pairs = b_idx.shape[0]
     out_x = np.empty((2 * k, n_pairs))
     out_y = np.empty((2 * k, n_pairs))
-    ebx, eby, ang_b = np.empty(k), np.empty(k), np.empty(k)
-    eax, eay, ang_a = np.empty(k), np.empty(k), np.empty(k)
-    rank_b, rank_a = np.empty(k, np.int64), np.empty(k, np.int64)
-    ex, ey = np.empty(2 * k), np.empty(2 * k)
-    nax, nay = np.empty((k, 1)), np.empty((k, 1))
+    scr = _scratch(k)
     for p in range(n_pairs):
-        b, a = b_idx[p], a_idx[p]
-        for v in range(k):
-            nax[v, 0] = -sx[v, a]  # a point reflection keeps counter-clockwise order
-            nay[v, 0] = -sy[v, a]
-        fin_b = _edge_angles(sx[:, b : b + 1], sy[:, b : b + 1], 0, ebx, eby, ang_b)
-        fin_a = _edge_angles(nax, nay, 0, eax, eay, ang_a)
-        first_b = _own_rank(ang_b, fin_b, rank_b)
-        first_a = _own_rank(ang_a, fin_a, rank_a)
-        for kb in range(k):
-            pos_b = rank_b[kb]
-            for m in range(k):
-                if ang_a[m] < ang_b[kb]:
-                    pos_b += 1
-            ex[pos_b], ey[pos_b] = ebx[kb], eby[kb]
-        for m in range(k):
-            pos_a = rank_a[m]
-            for kb in range(k):
-                if not (ang_a[m] < ang_b[kb]):
-                    pos_a += 1
-            ex[pos_a], ey[pos_a] = eax[m], eay[m]
-        # The walk starts at the sum of the tails of both polygons' first edges.
-        x0 = sx[first_b, b] + nax[first_a, 0]
-        y0 = sy[first_b, b] + nay[first_a, 0]
-        out_x[0, p] = x0 + off_x[p]
-        out_y[0, p] = y0 + off_y[p]
-        cx, cy = ex[0], ey[0]
-        for v in range(1, 2 * k):
-            out_x[v, p] = (x0 + cx) + off_x[p]
-            out_y[v, p] = (y0 + cy) + off_y[p]
-            cx += ex[v]
-            cy += ey[v]
+        _minkowski_one(sx, sy, b_idx[p], a_idx[p], off_x[p], off_y[p], out_x, out_y, p, scr)
     return out_x, out_y
 
 
@@ -134,108 +158,268 @@ def vo_projection(rx, ry, wx, wy, inv_horizon, inv_dt, leg_preference, keep_righ
     ux_o, uy_o = np.empty(n_p), np.empty(n_p)
     nx_o, ny_o = np.empty(n_p), np.empty(n_p)
     inside_o = np.empty(n_p, np.bool_)
-    ex, ey = np.empty(n_v), np.empty(n_v)
-    nx, ny = np.empty(n_v), np.empty(n_v)
-    real, front = np.empty(n_v, np.bool_), np.empty(n_v, np.bool_)
+    work = _vo_scratch(n_v)
     for p in range(n_p):
-        wxp, wyp = wx[p], wy[p]
-        colliding = True
-        for v in range(n_v):
-            w = v + 1 if v + 1 < n_v else 0
-            ex[v] = rx[w, p] - rx[v, p]
-            ey[v] = ry[w, p] - ry[v, p]
-            elen = np.sqrt(ex[v] * ex[v] + ey[v] * ey[v])
-            real[v] = elen > MIN_EDGE_M
-            inv_len = 1.0 / max(elen, MIN_EDGE_M)
-            # Outward normal of a counter-clockwise polygon: right-hand perpendicular.
-            nx[v], ny[v] = ey[v] * inv_len, -ex[v] * inv_len
-            # The origin lies outside this edge's line.
-            front[v] = real[v] and (nx[v] * rx[v, p] + ny[v] * ry[v, p] < 0.0)
-            if front[v]:
-                colliding = False
-        inv = inv_dt if colliding else inv_horizon[p]
-
-        # Legs of the cone: rays through the extreme vertices seen from the origin.
-        cx, cy = rx[0, p], ry[0, p]
-        for v in range(1, n_v):
-            cx += rx[v, p]
-            cy += ry[v, p]
-        kl = kr = 0
-        kmax = kmin = 0.0
-        for v in range(n_v):
-            key = _pseudo_angle(cx * rx[v, p] + cy * ry[v, p], cx * ry[v, p] - cy * rx[v, p])
-            # Angles relative to the centroid lie in (-pi, pi): shift to a monotone order.
-            key = key - 4.0 if key >= 2.0 else key
-            if v == 0 or key > kmax:
-                kmax, kl = key, v
-            if v == 0 or key < kmin:
-                kmin, kr = key, v
-        lx, ly, gx, gy = rx[kl, p], ry[kl, p], rx[kr, p], ry[kr, p]
-        ll = 1.0 / max(np.sqrt(lx * lx + ly * ly), MIN_EDGE_M)
-        gl = 1.0 / max(np.sqrt(gx * gx + gy * gy), MIN_EDGE_M)
-        lux, luy, gux, guy = lx * ll, ly * ll, gx * gl, gy * gl
-
-        # Facets: edges facing the origin and both legs (no collision) or all edges.
-        s_in = -np.inf
-        nix = niy = 0.0
-        first = True
-        for v in range(n_v):
-            if real[v] and (colliding or front[v]):
-                s = nx[v] * (wxp - rx[v, p] * inv) + ny[v] * (wyp - ry[v, p] * inv)
-            else:
-                s = -np.inf
-            if first or s > s_in:
-                s_in, nix, niy = s, nx[v], ny[v]
-                first = False
-        s_left = -np.inf if colliding else -luy * wxp + lux * wyp
-        s_right = -np.inf if colliding else guy * wxp - gux * wyp
-        # Near-ties go to the right leg: both robots keep right.
-        speed = np.sqrt(wxp * wxp + wyp * wyp)
-        right = s_right + keep_right * speed >= s_left
-        if right:
-            s_leg, lnx, lny = s_right, guy, -gux
-        else:
-            s_leg, lnx, lny = s_left, -luy, lux
-        inside = max(s_in, s_leg) <= 0.0
-        # A leg within leg_preference * |w| of the nearest face is taken instead.
-        if (not colliding) and (s_leg + leg_preference * speed >= s_in):
-            s_in, nix, niy = s_leg, lnx, lny
-
-        # Outside: project on the boundary pieces (edges facing away are never closer).
-        best = 0.0
-        bx = by = 0.0
-        for v in range(n_v):
-            qx, qy = rx[v, p] * inv, ry[v, p] * inv
-            esx, esy = ex[v] * inv, ey[v] * inv
-            t = ((wxp - qx) * esx + (wyp - qy) * esy) / max(esx * esx + esy * esy, 1e-300)
-            t = min(max(t, 0.0), 1.0)
-            px, py = qx + t * esx, qy + t * esy
-            d2 = (wxp - px) * (wxp - px) + (wyp - py) * (wyp - py)
-            if v == 0 or d2 < best:
-                best, bx, by = d2, px, py
-        if not colliding:
-            for leg in range(2):
-                if leg == 0:
-                    ux_, uy_, ox, oy = lux, luy, lx * inv, ly * inv
-                else:
-                    ux_, uy_, ox, oy = gux, guy, gx * inv, gy * inv
-                tr = max((wxp - ox) * ux_ + (wyp - oy) * uy_, 0.0)
-                cxr, cyr = ox + tr * ux_, oy + tr * uy_
-                dr = (wxp - cxr) * (wxp - cxr) + (wyp - cyr) * (wyp - cyr)
-                if dr < best:
-                    best, bx, by = dr, cxr, cyr
-        inside_o[p] = inside
-        if inside:
-            ux_o[p], uy_o[p] = -s_in * nix, -s_in * niy
-            nx_o[p], ny_o[p] = nix, niy
-        else:
-            awx, awy = wxp - bx, wyp - by
-            dist = np.sqrt(awx * awx + awy * awy)
-            ux_o[p], uy_o[p] = bx - wxp, by - wyp
-            # On the boundary itself the facet normal found above is the outward normal.
-            if dist > 1e-12:
-                inv_d = 1.0 / max(dist, 1e-12)
-                nx_o[p], ny_o[p] = awx * inv_d, awy * inv_d
-            else:
-                nx_o[p], ny_o[p] = nix, niy
+        ux_o[p], uy_o[p], nx_o[p], ny_o[p], inside_o[p] = _vo_one(
+            rx, ry, p, wx[p], wy[p], inv_horizon[p], inv_dt, leg_preference, keep_right, work
+        )
     return ux_o, uy_o, nx_o, ny_o, inside_o
+
+
+@njit(cache=True)
+def _vo_scratch(n_v):
+    return (
+        np.empty(n_v),
+        np.empty(n_v),
+        np.empty(n_v),
+        np.empty(n_v),
+        np.empty(n_v, np.bool_),
+        np.empty(n_v, np.bool_),
+    )
+
+
+@njit(cache=True)
+def _vo_one(rx, ry, p, wxp, wyp, inv_horizon, inv_dt, leg_preference, keep_right, work):
+    """:func:`vo_projection` of column ``p``: ``(ux, uy, nx, ny, inside)``."""
+    ex, ey, nx, ny, real, front = work
+    n_v = rx.shape[0]
+    colliding = True
+    for v in range(n_v):
+        w = v + 1 if v + 1 < n_v else 0
+        ex[v] = rx[w, p] - rx[v, p]
+        ey[v] = ry[w, p] - ry[v, p]
+        elen = np.sqrt(ex[v] * ex[v] + ey[v] * ey[v])
+        real[v] = elen > MIN_EDGE_M
+        inv_len = 1.0 / max(elen, MIN_EDGE_M)
+        # Outward normal of a counter-clockwise polygon: right-hand perpendicular.
+        nx[v], ny[v] = ey[v] * inv_len, -ex[v] * inv_len
+        # The origin lies outside this edge's line.
+        front[v] = real[v] and (nx[v] * rx[v, p] + ny[v] * ry[v, p] < 0.0)
+        if front[v]:
+            colliding = False
+    inv = inv_dt if colliding else inv_horizon
+
+    # Legs of the cone: rays through the extreme vertices seen from the origin.
+    cx, cy = rx[0, p], ry[0, p]
+    for v in range(1, n_v):
+        cx += rx[v, p]
+        cy += ry[v, p]
+    kl = kr = 0
+    kmax = kmin = 0.0
+    for v in range(n_v):
+        key = _pseudo_angle(cx * rx[v, p] + cy * ry[v, p], cx * ry[v, p] - cy * rx[v, p])
+        # Angles relative to the centroid lie in (-pi, pi): shift to a monotone order.
+        key = key - 4.0 if key >= 2.0 else key
+        if v == 0 or key > kmax:
+            kmax, kl = key, v
+        if v == 0 or key < kmin:
+            kmin, kr = key, v
+    lx, ly, gx, gy = rx[kl, p], ry[kl, p], rx[kr, p], ry[kr, p]
+    ll = 1.0 / max(np.sqrt(lx * lx + ly * ly), MIN_EDGE_M)
+    gl = 1.0 / max(np.sqrt(gx * gx + gy * gy), MIN_EDGE_M)
+    lux, luy, gux, guy = lx * ll, ly * ll, gx * gl, gy * gl
+
+    # Facets: edges facing the origin and both legs (no collision) or all edges.
+    s_in = -np.inf
+    nix = niy = 0.0
+    for v in range(n_v):
+        if real[v] and (colliding or front[v]):
+            s = nx[v] * (wxp - rx[v, p] * inv) + ny[v] * (wyp - ry[v, p] * inv)
+        else:
+            s = -np.inf
+        if v == 0 or s > s_in:
+            s_in, nix, niy = s, nx[v], ny[v]
+    s_left = -np.inf if colliding else -luy * wxp + lux * wyp
+    s_right = -np.inf if colliding else guy * wxp - gux * wyp
+    # Near-ties go to the right leg: both robots keep right (the pair's obstacles are point
+    # reflections of each other, which keeps handedness); without the margin a nearly
+    # symmetric encounter flips sides with every small turn.
+    speed = np.sqrt(wxp * wxp + wyp * wyp)
+    if s_right + keep_right * speed >= s_left:
+        s_leg, lnx, lny = s_right, guy, -gux
+    else:
+        s_leg, lnx, lny = s_left, -luy, lux
+    inside = max(s_in, s_leg) <= 0.0
+    # Inside, any facet line keeps the reciprocal guarantee; a flat cut-off face only
+    # brakes two robots meeting head-on, so a leg within leg_preference * |w| is taken.
+    if (not colliding) and (s_leg + leg_preference * speed >= s_in):
+        s_in, nix, niy = s_leg, lnx, lny
+    if inside:
+        return -s_in * nix, -s_in * niy, nix, niy, True
+
+    # Outside: project on the boundary pieces (edges facing away are never closer).
+    best = 0.0
+    bx = by = 0.0
+    for v in range(n_v):
+        qx, qy = rx[v, p] * inv, ry[v, p] * inv
+        esx, esy = ex[v] * inv, ey[v] * inv
+        t = ((wxp - qx) * esx + (wyp - qy) * esy) / max(esx * esx + esy * esy, 1e-300)
+        t = min(max(t, 0.0), 1.0)
+        px, py = qx + t * esx, qy + t * esy
+        d2 = (wxp - px) * (wxp - px) + (wyp - py) * (wyp - py)
+        if v == 0 or d2 < best:
+            best, bx, by = d2, px, py
+    if not colliding:
+        for leg in range(2):
+            if leg == 0:
+                ux_, uy_, ox, oy = lux, luy, lx * inv, ly * inv
+            else:
+                ux_, uy_, ox, oy = gux, guy, gx * inv, gy * inv
+            tr = max((wxp - ox) * ux_ + (wyp - oy) * uy_, 0.0)
+            cxr, cyr = ox + tr * ux_, oy + tr * uy_
+            dr = (wxp - cxr) * (wxp - cxr) + (wyp - cyr) * (wyp - cyr)
+            if dr < best:
+                best, bx, by = dr, cxr, cyr
+    awx, awy = wxp - bx, wyp - by
+    dist = np.sqrt(awx * awx + awy * awy)
+    # On the boundary itself the facet normal found above is the outward normal.
+    if dist > 1e-12:
+        inv_d = 1.0 / max(dist, 1e-12)
+        return bx - wxp, by - wyp, awx * inv_d, awy * inv_d, False
+    return bx - wxp, by - wyp, nix, niy, False
+
+
+@njit(cache=True)
+def _nearest_first(pos, idx, dist, max_nb):
+    """Neighbours ``(N, M)`` (``-1``: none) from a k-d tree query ``idx, dist`` ``(N, k)``
+    (``idx == N``: missing), without the robot itself, nearest first; exact distance ties
+    broken by the relative position (geometry, not robot index), then by query order."""
+    n, k = idx.shape
+    m = min(k, max_nb)
+    nbr = np.full((n, m), -1, np.int64)
+    cj = np.empty(k, np.int64)
+    cd, cx, cy = np.empty(k), np.empty(k), np.empty(k)
+    for i in range(n):
+        cnt = 0
+        for c in range(k):
+            j = idx[i, c]
+            if j >= n or j == i:
+                continue
+            dj, xj, yj = dist[i, c], pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]
+            # Stable insertion by (distance, dx, dy).
+            q = cnt
+            while q > 0 and (
+                dj < cd[q - 1]
+                or (dj == cd[q - 1] and (xj < cx[q - 1] or (xj == cx[q - 1] and yj < cy[q - 1])))
+            ):
+                cj[q], cd[q], cx[q], cy[q] = cj[q - 1], cd[q - 1], cx[q - 1], cy[q - 1]
+                q -= 1
+            cj[q], cd[q], cx[q], cy[q] = j, dj, xj, yj
+            cnt += 1
+        for s in range(min(cnt, m)):
+            nbr[i, s] = cj[s]
+    return nbr
+
+
+@njit(cache=True, inline="always")
+def canonical(pos, i, j):
+    """The pair ``(lo, hi)`` built from the side of the robot with the smaller ``(x, y)``
+    (then the smaller index), so the floats do not depend on the robots' order."""
+    lo, hi = min(i, j), max(i, j)
+    if pos[hi, 0] < pos[lo, 0] or (pos[hi, 0] == pos[lo, 0] and pos[hi, 1] < pos[lo, 1]):
+        return hi, lo
+    return lo, hi
+
+
+@njit(cache=True)
+def robot_lines(
+    pos, vel, prio, still, idx, dist, sx, sy, max_nb, inv_h, inv_dt, leg, keep_right, min_share
+):
+    """ORCA lines ``(N, M)`` of every robot against its nearest neighbours.
+
+    ``idx, dist``: the k-d tree query (``k = max_nb + 1``, the robot itself included).
+    Each unordered pair's velocity obstacle is built once, from its canonical side (the
+    obstacle of ``j`` seen from ``i`` is the point reflection of that of ``i`` seen from
+    ``j``). Robot ``i`` takes the share ``p_j / (p_i + p_j)`` (clipped to
+    ``[min_share, 1 - min_share]``) inside the obstacle and its complement outside (room
+    to approach: the higher priority gets most of it); against an immobile robot, all.
+    Returns ``px, py, dx, dy`` (float) and ``valid`` (bool), all ``(N, M)``.
+    """
+    n = pos.shape[0]
+    nbr = _nearest_first(pos, idx, dist, max_nb)
+    m = nbr.shape[1]
+    k = sx.shape[0]
+    ux, uy = np.zeros((n, m)), np.zeros((n, m))
+    nx, ny = np.zeros((n, m)), np.zeros((n, m))
+    inside = np.zeros((n, m), np.bool_)
+    mirror = np.full((n, m), -1, np.int64)  # slot of the same pair in the other's list
+    reg_x, reg_y = np.empty((2 * k, 1)), np.empty((2 * k, 1))
+    scr, work = _scratch(k), _vo_scratch(2 * k)
+    for i in range(n):
+        for s in range(m):
+            j = nbr[i, s]
+            if j < 0:
+                break
+            lo, hi = canonical(pos, i, j)
+            if i == hi:
+                for s2 in range(m):
+                    if nbr[j, s2] == i:
+                        mirror[i, s] = s2
+                        break
+                if mirror[i, s] >= 0:
+                    continue  # built from j's side
+            off_x, off_y = pos[hi, 0] - pos[lo, 0], pos[hi, 1] - pos[lo, 1]
+            _minkowski_one(sx, sy, hi, lo, off_x, off_y, reg_x, reg_y, 0, scr)
+            wx, wy = vel[lo, 0] - vel[hi, 0], vel[lo, 1] - vel[hi, 1]
+            ux[i, s], uy[i, s], nx[i, s], ny[i, s], inside[i, s] = _vo_one(
+                reg_x, reg_y, 0, wx, wy, inv_h, inv_dt, leg, keep_right, work
+            )
+    px, py = np.zeros((n, m)), np.zeros((n, m))
+    dx, dy = np.ones((n, m)), np.zeros((n, m))
+    valid = np.zeros((n, m), np.bool_)
+    for i in range(n):
+        for s in range(m):
+            j = nbr[i, s]
+            if j < 0:
+                break
+            s2 = mirror[i, s]
+            if s2 >= 0:
+                u_x, u_y, n_x, n_y, ins = ux[j, s2], uy[j, s2], nx[j, s2], ny[j, s2], inside[j, s2]
+            else:
+                u_x, u_y, n_x, n_y, ins = ux[i, s], uy[i, s], nx[i, s], ny[i, s], inside[i, s]
+            sign = 1.0 if canonical(pos, i, j)[0] == i else -1.0
+            tot = prio[i] + prio[j]
+            share = prio[j] / tot if tot > 0 else 0.5
+            share = min(max(share, min_share), 1.0 - min_share)
+            if not ins:
+                share = 1.0 - share
+            if still[j]:
+                share = 1.0
+            px[i, s] = vel[i, 0] + share * (sign * u_x)
+            py[i, s] = vel[i, 1] + share * (sign * u_y)
+            dx[i, s] = sign * n_y
+            dy[i, s] = -(sign * n_x)
+            valid[i, s] = True
+    return px, py, dx, dy, valid
+
+
+@njit(cache=True)
+def canonical_pairs(pos, i, j):
+    """:func:`canonical` for arrays of pairs: ``lo, hi`` ``(P,)``."""
+    lo, hi = np.empty_like(i), np.empty_like(j)
+    for p in range(i.shape[0]):
+        lo[p], hi[p] = canonical(pos, i[p], j[p])
+    return lo, hi
+
+
+@njit(cache=True)
+def first_not_convex_ccw(polys):
+    """Index of the first polygon ``(N, K, 2)`` that is not convex with counter-clockwise
+    vertices, or ``-1``. Padding by repeated vertices (zero edges) is allowed."""
+    n, k = polys.shape[0], polys.shape[1]
+    for i in range(n):
+        area2 = 0.0
+        for v in range(k):
+            w = v + 1 if v + 1 < k else 0
+            u = w + 1 if w + 1 < k else 0
+            ex, ey = polys[i, w, 0] - polys[i, v, 0], polys[i, w, 1] - polys[i, v, 1]
+            fx, fy = polys[i, u, 0] - polys[i, w, 0], polys[i, u, 1] - polys[i, w, 1]
+            le, lf = np.sqrt(ex * ex + ey * ey), np.sqrt(fx * fx + fy * fy)
+            # Turn between consecutive real edges (padding gives zero edges).
+            cross = ex * fy - ey * fx
+            if le > MIN_EDGE_M and lf > MIN_EDGE_M and cross < -1e-9 * max(le * lf, 1e-30):
+                return i
+            area2 += polys[i, v, 0] * polys[i, w, 1] - polys[i, v, 1] * polys[i, w, 0]
+        if area2 < 0:
+            return i
+    return -1
