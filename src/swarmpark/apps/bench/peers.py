@@ -93,8 +93,8 @@ def run_pyrvo(n: int, max_steps: int, seed: int = 0, params: OrcaParams | None =
     rng = np.random.default_rng(seed)
     turn = rotation(-KEEP_RIGHT_RAD)
     pos = start.copy()
-    cpu_ms, overlap, step = [], 0.0, 0
-    for step in range(1, max_steps + 1):
+    cpu_ms, overlap = [], 0.0
+    for _ in range(max_steps):
         to_goal = goal - pos
         dist = np.linalg.norm(to_goal, axis=-1)
         speed = np.minimum(MAX_SPEED_MPS, dist / DT_S)
@@ -112,7 +112,7 @@ def run_pyrvo(n: int, max_steps: int, seed: int = 0, params: OrcaParams | None =
         overlap = max(overlap, _max_overlap(pos))
         if np.all(np.linalg.norm(goal - pos, axis=-1) <= GOAL_TOLERANCE_M):
             break
-    return _row("pyrvo", n, step, cpu_ms, overlap, pos, goal)
+    return _row("pyrvo", n, len(cpu_ms), cpu_ms, overlap, pos, goal)
 
 
 def _navground_world(start: np.ndarray, goal: np.ndarray, params: OrcaParams):
@@ -142,9 +142,9 @@ def run_navground(n: int, max_steps: int, params: OrcaParams | None = None) -> d
     start, goal, _ = circle_scenario(n)
     world = _navground_world(start, goal, params)
     agents = world.agents
-    cpu_ms, overlap, step = [], 0.0, 0
+    cpu_ms, overlap = [], 0.0
     pos = start
-    for step in range(1, max_steps + 1):
+    for _ in range(max_steps):
         c0 = time.process_time()
         world.update(DT_S)
         cpu_ms.append((time.process_time() - c0) * 1e3)
@@ -152,4 +152,4 @@ def run_navground(n: int, max_steps: int, params: OrcaParams | None = None) -> d
         overlap = max(overlap, _max_overlap(pos))
         if np.all(np.linalg.norm(goal - pos, axis=-1) <= GOAL_TOLERANCE_M):
             break
-    return _row("navground", n, step, cpu_ms, overlap, pos, goal)
+    return _row("navground", n, len(cpu_ms), cpu_ms, overlap, pos, goal)
