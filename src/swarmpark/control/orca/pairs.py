@@ -70,55 +70,55 @@ def _own_rank(ang, finite, rank):
 
 
 @njit(cache=True)
-def _scratch(k):
-    """Work arrays of one Minkowski merge of two ``k``-gons."""
-    return (
-        np.empty(k),
-        np.empty(k),
-        np.empty(k),  # edges and angles of B
-        np.empty(k),
-        np.empty(k),
-        np.empty(k),  # of -A
-        np.empty(k, np.int64),
-        np.empty(k, np.int64),  # own ranks
-        np.empty(2 * k),
-        np.empty(2 * k),  # merged edges
-        np.empty((k, 1)),
-        np.empty((k, 1)),  # -A
-    )
+def polygon_edges(sx, sy):
+    """Per polygon ``(K, N)``, what the merges need, for ``B`` and for ``-A``: edges,
+    pseudo-angles, rank in angle order and the first edge (computed once per robot, not
+    once per pair). Returns ``(ex, ey, ang, rank, first)`` for ``B`` then for ``-A``."""
+    k, n = sx.shape
+    out = []
+    for sign in (1.0, -1.0):
+        ex, ey, ang = np.empty((k, n)), np.empty((k, n)), np.empty((k, n))
+        rank, first = np.empty((k, n), np.int64), np.empty(n, np.int64)
+        px, py = np.empty((k, 1)), np.empty((k, 1))
+        e_x, e_y, e_a, e_r = np.empty(k), np.empty(k), np.empty(k), np.empty(k, np.int64)
+        for i in range(n):
+            for v in range(k):
+                # -A: a point reflection keeps counter-clockwise order.
+                px[v, 0] = sx[v, i] if sign > 0 else -sx[v, i]
+                py[v, 0] = sy[v, i] if sign > 0 else -sy[v, i]
+            fin = _edge_angles(px, py, 0, e_x, e_y, e_a)
+            first[i] = _own_rank(e_a, fin, e_r)
+            ex[:, i], ey[:, i], ang[:, i], rank[:, i] = e_x, e_y, e_a, e_r
+        out.append((ex, ey, ang, rank, first))
+    return out[0], out[1]
 
 
 @njit(cache=True)
-def _minkowski_one(sx, sy, b, a, off_x, off_y, out_x, out_y, col, scr):
-    """Column ``col`` of ``out``: ``off + shape[b] ⊕ -shape[a]`` (shapes ``(K, N)``).
+def _minkowski_one(sx, sy, b, a, off_x, off_y, out_x, out_y, col, edges_b, edges_a, ex, ey):
+    """Column ``col`` of ``out``: ``off + shape[b] ⊕ -shape[a]`` (shapes ``(K, N)``, their
+    :func:`polygon_edges`; ``ex, ey`` scratch of ``2K``).
 
     Each edge's place in the merged walk is its rank in its own polygon plus the number of
     the other polygon's edges before it (equal angles: the edge of B first).
     """
-    ebx, eby, ang_b, eax, eay, ang_a, rank_b, rank_a, ex, ey, nax, nay = scr
+    ebx, eby, ang_b, rank_b, first_b = edges_b
+    eax, eay, ang_a, rank_a, first_a = edges_a
     k = sx.shape[0]
-    for v in range(k):
-        nax[v, 0] = -sx[v, a]  # a point reflection keeps counter-clockwise order
-        nay[v, 0] = -sy[v, a]
-    fin_b = _edge_angles(sx, sy, b, ebx, eby, ang_b)
-    fin_a = _edge_angles(nax, nay, 0, eax, eay, ang_a)
-    first_b = _own_rank(ang_b, fin_b, rank_b)
-    first_a = _own_rank(ang_a, fin_a, rank_a)
     for kb in range(k):
-        pos_b = rank_b[kb]
+        pos_b = rank_b[kb, b]
         for m in range(k):
-            if ang_a[m] < ang_b[kb]:
+            if ang_a[m, a] < ang_b[kb, b]:
                 pos_b += 1
-        ex[pos_b], ey[pos_b] = ebx[kb], eby[kb]
+        ex[pos_b], ey[pos_b] = ebx[kb, b], eby[kb, b]
     for m in range(k):
-        pos_a = rank_a[m]
+        pos_a = rank_a[m, a]
         for kb in range(k):
-            if not (ang_a[m] < ang_b[kb]):
+            if not (ang_a[m, a] < ang_b[kb, b]):
                 pos_a += 1
-        ex[pos_a], ey[pos_a] = eax[m], eay[m]
+        ex[pos_a], ey[pos_a] = eax[m, a], eay[m, a]
     # The walk starts at the sum of the tails of both polygons' first edges.
-    x0 = sx[first_b, b] + nax[first_a, 0]
-    y0 = sy[first_b, b] + nay[first_a, 0]
+    x0 = sx[first_b[b], b] + -sx[first_a[a], a]
+    y0 = sy[first_b[b], b] + -sy[first_a[a], a]
     out_x[0, col] = x0 + off_x
     out_y[0, col] = y0 + off_y
     cx, cy = ex[0], ey[0]
@@ -140,9 +140,24 @@ def minkowski_pairs(sx, sy, b_idx, a_idx, off_x, off_y):
     n_pairs = b_idx.shape[0]
     out_x = np.empty((2 * k, n_pairs))
     out_y = np.empty((2 * k, n_pairs))
-    scr = _scratch(k)
+    edges_b, edges_a = polygon_edges(sx, sy)
+    ex, ey = np.empty(2 * k), np.empty(2 * k)
     for p in range(n_pairs):
-        _minkowski_one(sx, sy, b_idx[p], a_idx[p], off_x[p], off_y[p], out_x, out_y, p, scr)
+        _minkowski_one(
+            sx,
+            sy,
+            b_idx[p],
+            a_idx[p],
+            off_x[p],
+            off_y[p],
+            out_x,
+            out_y,
+            p,
+            edges_b,
+            edges_a,
+            ex,
+            ey,
+        )
     return out_x, out_y
 
 
@@ -344,7 +359,9 @@ def robot_lines(
     inside = np.zeros((n, m), np.bool_)
     mirror = np.full((n, m), -1, np.int64)  # slot of the same pair in the other's list
     reg_x, reg_y = np.empty((2 * k, 1)), np.empty((2 * k, 1))
-    scr, work = _scratch(k), _vo_scratch(2 * k)
+    edges_b, edges_a = polygon_edges(sx, sy)
+    ex, ey = np.empty(2 * k), np.empty(2 * k)
+    work = _vo_scratch(2 * k)
     for i in range(n):
         for s in range(m):
             j = nbr[i, s]
@@ -359,7 +376,7 @@ def robot_lines(
                 if mirror[i, s] >= 0:
                     continue  # built from j's side
             off_x, off_y = pos[hi, 0] - pos[lo, 0], pos[hi, 1] - pos[lo, 1]
-            _minkowski_one(sx, sy, hi, lo, off_x, off_y, reg_x, reg_y, 0, scr)
+            _minkowski_one(sx, sy, hi, lo, off_x, off_y, reg_x, reg_y, 0, edges_b, edges_a, ex, ey)
             wx, wy = vel[lo, 0] - vel[hi, 0], vel[lo, 1] - vel[hi, 1]
             ux[i, s], uy[i, s], nx[i, s], ny[i, s], inside[i, s] = _vo_one(
                 reg_x, reg_y, 0, wx, wy, inv_h, inv_dt, leg, keep_right, work
