@@ -74,7 +74,7 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from swarmpark.control.orca import lp, pairs, safety
+from swarmpark.control.orca import lp, neighbours, pairs, safety
 from swarmpark.control.orca.pairs import MIN_EDGE_M
 
 __all__ = [
@@ -1037,26 +1037,27 @@ def orca_step(
     # Other robots: reciprocal, shares by priority (compiled, :func:`.pairs.robot_lines`).
     robot_pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
     if n > 1:
-        tree = cKDTree(pos)
+        cut = params.neighbour_dist_m
+        if cut is None:
+            top = np.sort(speed)[-2:].sum()
+            cut = params.time_horizon_s * top + np.sort(reach)[-2:].sum()
+        # Pairs that can touch within one step at the speed limits.
+        near = 2.0 * reach.max() + 2.0 * vmax.max() * dt_s if params.safety_filter else -1.0
+        slots = min(params.max_neighbours + 1, n, params.max_neighbours)
+        nbr, fp = neighbours.grid_neighbours(
+            pos, float(cut) if params.max_neighbours else -1.0, slots, slots, float(near)
+        )
         # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
         sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
         if params.max_neighbours:
-            cut = params.neighbour_dist_m
-            if cut is None:
-                top = np.sort(speed)[-2:].sum()
-                cut = params.time_horizon_s * top + np.sort(reach)[-2:].sum()
-            k = min(params.max_neighbours + 1, n)
-            dist, idx = tree.query(pos, k=k, distance_upper_bound=cut)
             lines = pairs.robot_lines(
                 pos,
                 vel,
                 prio,
                 still,
-                idx.reshape(n, k).astype(np.int64, copy=False),
-                dist.reshape(n, k),
+                nbr,
                 sx,
                 sy,
-                int(params.max_neighbours),
                 1.0 / params.time_horizon_s,
                 float(inv_dt),
                 float(params.leg_preference),
@@ -1066,9 +1067,6 @@ def orca_step(
             if lines[4].any():
                 blocks.append(lines)
         if params.safety_filter:
-            # Pairs that can touch within one step at the speed limits.
-            near = 2.0 * reach.max() + 2.0 * vmax.max() * dt_s
-            fp = tree.query_pairs(near, output_type="ndarray").astype(np.int64)
             lo, hi = pairs.canonical_pairs(pos, fp[:, 0].copy(), fp[:, 1].copy())
             rx, ry = pairs.minkowski_pairs(
                 sx, sy, hi, lo, pos[hi, 0] - pos[lo, 0], pos[hi, 1] - pos[lo, 1]

@@ -294,38 +294,6 @@ def _vo_one(rx, ry, p, wxp, wyp, inv_horizon, inv_dt, leg_preference, keep_right
     return bx - wxp, by - wyp, nix, niy, False
 
 
-@njit(cache=True)
-def _nearest_first(pos, idx, dist, max_nb):
-    """Neighbours ``(N, M)`` (``-1``: none) from a k-d tree query ``idx, dist`` ``(N, k)``
-    (``idx == N``: missing), without the robot itself, nearest first; exact distance ties
-    broken by the relative position (geometry, not robot index), then by query order."""
-    n, k = idx.shape
-    m = min(k, max_nb)
-    nbr = np.full((n, m), -1, np.int64)
-    cj = np.empty(k, np.int64)
-    cd, cx, cy = np.empty(k), np.empty(k), np.empty(k)
-    for i in range(n):
-        cnt = 0
-        for c in range(k):
-            j = idx[i, c]
-            if j >= n or j == i:
-                continue
-            dj, xj, yj = dist[i, c], pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]
-            # Stable insertion by (distance, dx, dy).
-            q = cnt
-            while q > 0 and (
-                dj < cd[q - 1]
-                or (dj == cd[q - 1] and (xj < cx[q - 1] or (xj == cx[q - 1] and yj < cy[q - 1])))
-            ):
-                cj[q], cd[q], cx[q], cy[q] = cj[q - 1], cd[q - 1], cx[q - 1], cy[q - 1]
-                q -= 1
-            cj[q], cd[q], cx[q], cy[q] = j, dj, xj, yj
-            cnt += 1
-        for s in range(min(cnt, m)):
-            nbr[i, s] = cj[s]
-    return nbr
-
-
 @njit(cache=True, inline="always")
 def canonical(pos, i, j):
     """The pair ``(lo, hi)`` built from the side of the robot with the smaller ``(x, y)``
@@ -337,12 +305,11 @@ def canonical(pos, i, j):
 
 
 @njit(cache=True)
-def robot_lines(
-    pos, vel, prio, still, idx, dist, sx, sy, max_nb, inv_h, inv_dt, leg, keep_right, min_share
-):
+def robot_lines(pos, vel, prio, still, nbr, sx, sy, inv_h, inv_dt, leg, keep_right, min_share):
     """ORCA lines ``(N, M)`` of every robot against its nearest neighbours.
 
-    ``idx, dist``: the k-d tree query (``k = max_nb + 1``, the robot itself included).
+    ``nbr`` ``(N, M)``: each robot's neighbours, nearest first, ``-1`` after the last
+    (:func:`.neighbours.grid_neighbours`).
     Each unordered pair's velocity obstacle is built once, from its canonical side (the
     obstacle of ``j`` seen from ``i`` is the point reflection of that of ``i`` seen from
     ``j``). Robot ``i`` takes the share ``p_j / (p_i + p_j)`` (clipped to
@@ -350,9 +317,7 @@ def robot_lines(
     to approach: the higher priority gets most of it); against an immobile robot, all.
     Returns ``px, py, dx, dy`` (float) and ``valid`` (bool), all ``(N, M)``.
     """
-    n = pos.shape[0]
-    nbr = _nearest_first(pos, idx, dist, max_nb)
-    m = nbr.shape[1]
+    n, m = nbr.shape
     k = sx.shape[0]
     ux, uy = np.zeros((n, m)), np.zeros((n, m))
     nx, ny = np.zeros((n, m)), np.zeros((n, m))
