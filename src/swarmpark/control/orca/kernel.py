@@ -47,12 +47,14 @@ n-body collision avoidance", ISRR 2011), with these changes for swarmpark (hing2
   grows with ``rho * omega_max * dt``: put ``E`` at the middle of the footprint and run the
   decision at 10-20 Hz (at 20 Hz a 1.25 m x 0.75 m skid turning at 1.5 rad/s needs 5.6 cm).
 
-The half-planes are built vectorized over all neighbour pairs (neighbours from a
-``scipy.spatial.cKDTree``, limited to the ``max_neighbours`` nearest within a cut-off), and
-the small linear programs (RVO2's ``linearProgram1/2/3``) run vectorized across robots: one
-Python iteration per constraint slot, not per robot. Each unordered pair is built once, from
-the side of the robot with the smaller ``(x, y)``, so the result is bit-for-bit the same
-whatever the order of the robots.
+The hot loops are compiled (``numba``, cached on disk): the neighbour search over a bucket
+grid (:mod:`.neighbours`: the ``max_neighbours`` nearest within a cut-off, and the pairs the
+safety filter checks), the pair geometry and the robots' lines (:mod:`.pairs`), the small
+linear programs, RVO2's ``linearProgram1/2/3`` one robot at a time (:mod:`.lp`), and the
+safety filter (:mod:`.safety`). Each unordered pair is built once, from the side of the
+robot with the smaller ``(x, y)``, and neighbour ties are broken by geometry, so the
+result is bit-for-bit the same whatever the order of the robots. People and static
+obstacles (a few per robot) stay in numpy and shapely.
 
 Typical call, once per tick (see :func:`orca_step` for all arguments)::
 
@@ -67,15 +69,30 @@ Typical call, once per tick (see :func:`orca_step` for all arguments)::
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
 from swarmpark.control.orca import lp, neighbours, pairs, safety
-from swarmpark.control.orca.pairs import MIN_EDGE_M
+from swarmpark.control.orca.shapes import (
+    DEFAULT_DISC_SIDES,
+    StaticObstacles,
+    _as_array,
+    _check_convex_ccw,
+    _det,
+    disc_polygons,
+    effective_reach,
+    holonomic_speed_limit,
+    holonomic_to_unicycle,
+    inflate_convex,
+    minkowski_difference,
+    prepare_obstacles,
+    skid_shapes,
+    tracking_error_bound,
+    unicycle_to_holonomic,
+)
 
 __all__ = [
     "OrcaParams",
@@ -99,10 +116,6 @@ __all__ = [
     "unicycle_to_holonomic",
 ]
 
-#: Above this many edge pairs, the Minkowski merge sorts instead of counting ranks.
-SMALL_MERGE = 64
-#: Sides of the regular polygon that covers a person's disc (circumscribed: conservative).
-DEFAULT_DISC_SIDES = 8
 #: Half-width (m/s) of the band a robot held on its axis may leave it by (round-off room).
 AXIS_SLACK = 1e-6
 
@@ -239,190 +252,6 @@ class OrcaResult:
     infeasible: np.ndarray
     halfplanes: HalfPlanes
     slowed: np.ndarray
-
-
-@dataclass(frozen=True)
-class StaticObstacles:
-    """Static convex obstacles (walls as segments, pillars as convex polygons), ready to query.
-
-    Build with :func:`prepare_obstacles` once per map, then pass to every :func:`orca_step`.
-    """
-
-    vertices: np.ndarray  # (O, L, 2) counter-clockwise, padded by repeating the last vertex
-    tree: shapely.STRtree = field(repr=False)
-
-    def __len__(self) -> int:
-        return int(self.vertices.shape[0])
-
-
-# --------------------------------------------------------------------------------------------
-# small vector helpers
-
-
-def _det(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
-
-
-def _as_array(value, shape: tuple, name: str) -> np.ndarray:
-    """A finite float array of ``shape`` (``-1`` = any), or a ValueError naming ``name``."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: not a numeric array ({value!r})") from exc
-    if arr.ndim != len(shape) or any(
-        s != -1 and s != a for s, a in zip(shape, arr.shape, strict=True)
-    ):
-        want = "(" + ", ".join("*" if s == -1 else str(s) for s in shape) + ")"
-        raise ValueError(f"{name}: expected shape {want}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: values must be finite (got {arr!r})")
-    return arr
-
-
-def _check_convex_ccw(polys: np.ndarray, name: str) -> None:
-    """Raise if any polygon ``(N, K, 2)`` is not convex with counter-clockwise vertices."""
-    if polys.shape[0] == 0:
-        return
-    i = pairs.first_not_convex_ccw(np.ascontiguousarray(polys, dtype=float))
-    if i >= 0:
-        raise ValueError(
-            f"{name}[{i}]: not a convex polygon with counter-clockwise vertices: "
-            f"{polys[i].tolist()}"
-        )
-
-
-# --------------------------------------------------------------------------------------------
-# geometry of the velocity obstacle
-
-
-def _pseudo_angle(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """A strictly increasing function of ``atan2(y, x)`` on ``[0, 2 pi)``, values in ``[0, 4)``,
-    without trigonometry (only the order of angles is needed)."""
-    s = np.abs(x) + np.abs(y)
-    r = x / np.where(s > 0, s, 1.0)
-    return np.where(y >= 0, 1.0 - r, 3.0 + r)
-
-
-def _edges(a: np.ndarray) -> np.ndarray:
-    """Edge vectors ``next vertex - vertex`` along axis 0 (vertex-major layout ``(V, P)``)."""
-    e = np.empty_like(a)
-    np.subtract(a[1:], a[:-1], out=e[:-1])
-    np.subtract(a[0], a[-1], out=e[-1])
-    return e
-
-
-def _arg_extreme(a: np.ndarray, largest: bool) -> np.ndarray:
-    """``argmax``/``argmin`` over the short axis 0 of ``(V, P)``: a loop over ``V`` rows is
-    much faster in numpy than a per-column reduction; ties go to the first index."""
-    best = a[0].copy()
-    idx = np.zeros(a.shape[1], dtype=np.intp)
-    for k in range(1, a.shape[0]):
-        better = a[k] > best if largest else a[k] < best
-        best = np.where(better, a[k], best)
-        idx = np.where(better, k, idx)
-    return idx
-
-
-def _minkowski_xy(bx, by, ax, ay):
-    """``B ⊕ (-A)`` in vertex-major layout: ``(K, P)`` and ``(L, P)`` in, ``(K + L, P)`` out.
-
-    Edges of both polygons are merged by angle; each edge's place in the merged walk is its
-    rank within its own polygon plus the number of the other polygon's edges before it.
-    """
-    nax, nay = -ax, -ay  # a point reflection keeps counter-clockwise order
-    ebx, eby = _edges(bx), _edges(by)
-    eax, eay = _edges(nax), _edges(nay)
-    # Zero-length edges (padding) go last and add nothing to the walk.
-    ang_b = np.where(np.abs(ebx) + np.abs(eby) > MIN_EDGE_M, _pseudo_angle(ebx, eby), np.inf)
-    ang_a = np.where(np.abs(eax) + np.abs(eay) > MIN_EDGE_M, _pseudo_angle(eax, eay), np.inf)
-    k_b, k_a = ang_b.shape[0], ang_a.shape[0]
-    cols = np.arange(bx.shape[1])
-    if k_b * k_a > SMALL_MERGE:
-        return _minkowski_sorted(bx, by, nax, nay, ebx, eby, eax, eay, ang_b, ang_a)
-
-    def own_rank(ang):
-        first = _arg_extreme(ang, False)
-        if np.all(np.isfinite(ang)):
-            # No padding: edges of a convex polygon are already in cyclic angle order.
-            return (np.arange(ang.shape[0])[:, None] - first) % ang.shape[0], first
-        rank = np.zeros(ang.shape, dtype=np.intp)
-        for k in range(ang.shape[0]):
-            for m in range(ang.shape[0]):
-                if m != k:
-                    rank[k] += (ang[m] < ang[k]) | ((ang[m] == ang[k]) & (m < k))
-        return rank, first
-
-    (rank_b, first_b), (rank_a, first_a) = own_rank(ang_b), own_rank(ang_a)
-    pos_b, pos_a = rank_b.copy(), rank_a.copy()
-    for k in range(k_b):
-        for m in range(k_a):
-            # On equal angles the edge of B goes first.
-            less = ang_a[m] < ang_b[k]
-            pos_b[k] += less
-            pos_a[m] += ~less
-    n_cols = bx.shape[1]
-    flat = np.concatenate([pos_b, pos_a], axis=0) * n_cols + cols
-    ex = np.empty((k_b + k_a) * n_cols)
-    ey = np.empty_like(ex)
-    ex[flat.ravel()] = np.concatenate([ebx, eax], axis=0).ravel()
-    ey[flat.ravel()] = np.concatenate([eby, eay], axis=0).ravel()
-    ex, ey = ex.reshape(-1, n_cols), ey.reshape(-1, n_cols)
-    # The walk starts at the sum of the tails of both polygons' first edges.
-    sx = bx[first_b, cols] + nax[first_a, cols]
-    sy = by[first_b, cols] + nay[first_a, cols]
-    out_x = np.empty_like(ex)
-    out_y = np.empty_like(ey)
-    out_x[0], out_y[0] = sx, sy
-    out_x[1:] = sx + np.cumsum(ex[:-1], axis=0)
-    out_y[1:] = sy + np.cumsum(ey[:-1], axis=0)
-    return out_x, out_y
-
-
-def _minkowski_sorted(bx, by, nax, nay, ebx, eby, eax, eay, ang_b, ang_a):
-    """The edge merge of :func:`_minkowski_xy` by a sort, for polygons with many vertices."""
-    cols = np.arange(bx.shape[1])
-    kb, ka = np.argmin(ang_b, axis=0), np.argmin(ang_a, axis=0)
-    sx = bx[kb, cols] + nax[ka, cols]
-    sy = by[kb, cols] + nay[ka, cols]
-    ang = np.concatenate([ang_b, ang_a], axis=0)
-    order = np.argsort(ang, axis=0, kind="stable")
-    ex = np.take_along_axis(np.concatenate([ebx, eax], axis=0), order, axis=0)
-    ey = np.take_along_axis(np.concatenate([eby, eay], axis=0), order, axis=0)
-    out_x, out_y = np.empty_like(ex), np.empty_like(ey)
-    out_x[0], out_y[0] = sx, sy
-    out_x[1:] = sx + np.cumsum(ex[:-1], axis=0)
-    out_y[1:] = sy + np.cumsum(ey[:-1], axis=0)
-    return out_x, out_y
-
-
-def minkowski_difference(b: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Vertices of ``B ⊕ (-A)`` for batches of convex polygons, by merging edges by angle.
-
-    Parameters
-    ----------
-    b, a
-        ``(P, K, 2)`` and ``(P, L, 2)`` convex polygons with counter-clockwise vertices;
-        padding by repeated vertices (and segments as two-vertex polygons) is allowed.
-
-    Returns
-    -------
-    ``(P, K + L, 2)`` counter-clockwise vertices (collinear and repeated ones may occur).
-
-    Examples
-    --------
-    >>> sq = np.array([[[0, 0], [1, 0], [1, 1], [0, 1]]], float)
-    >>> m = minkowski_difference(sq, sq)
-    >>> float(m[0, :, 0].min()), float(m[0, :, 0].max())
-    (-1.0, 1.0)
-    """
-    b = np.asarray(b, dtype=float)
-    a = np.asarray(a, dtype=float)
-    mx, my = _minkowski_xy(b[..., 0].T, b[..., 1].T, a[..., 0].T, a[..., 1].T)
-    return np.stack([mx.T, my.T], -1)
 
 
 def pair_halfplanes(
@@ -610,6 +439,21 @@ def _solve(px, py, dx, dy, valid, n_hard, pref, radius, slowest_fallback):
     return result, infeasible
 
 
+def _solve_moving(lines, n_hard, still, pref, vmax, slowest_fallback):
+    """:func:`_solve` for the robots that move; the others get zero."""
+    n = still.shape[0]
+    move = np.flatnonzero(~still)
+    if move.size == n:
+        return _solve(*lines, n_hard, pref, vmax, slowest_fallback)
+    out = np.zeros((n, 2))
+    infeasible = np.zeros(n, dtype=bool)
+    if move.size:
+        out[move], infeasible[move] = _solve(
+            *(a[move] for a in lines), n_hard, pref[move], vmax[move], slowest_fallback
+        )
+    return out, infeasible
+
+
 def _slowest_least_violation(hp: HalfPlanes, rows, radius, result) -> None:
     """Among the velocities whose largest soft violation equals the one found by the 3-D
     program, take the slowest. RVO2 keeps an extreme point of that set, which in a symmetric
@@ -624,200 +468,6 @@ def _slowest_least_violation(hp: HalfPlanes, rows, radius, result) -> None:
     new, fail = _lp2(relaxed, d, v, radius[rows], np.zeros((rows.size, 2)))
     ok = fail >= v.shape[1]
     result[rows[ok]] = new[ok]
-
-
-# --------------------------------------------------------------------------------------------
-# shapes
-
-
-def disc_polygons(centres: np.ndarray, radii, sides: int = DEFAULT_DISC_SIDES) -> np.ndarray:
-    """Regular polygons ``(P, sides, 2)`` circumscribed about discs (a conservative cover).
-
-    Examples
-    --------
-    >>> sq = disc_polygons(np.zeros((1, 2)), 1.0, sides=4)
-    >>> np.round(np.abs(sq[0]), 9).tolist()
-    [[1.0, 1.0], [1.0, 1.0], [1.0, 1.0], [1.0, 1.0]]
-    """
-    c = np.asarray(centres, dtype=float).reshape(-1, 2)
-    r = np.broadcast_to(np.asarray(radii, dtype=float), c.shape[:1])
-    ang = (2.0 * np.arange(sides) + 1.0) * np.pi / sides
-    unit = np.stack([np.cos(ang), np.sin(ang)], -1) / np.cos(np.pi / sides)
-    return c[:, None, :] + r[:, None, None] * unit[None]
-
-
-def inflate_convex(polys: np.ndarray, margin_m) -> np.ndarray:
-    """Move every edge of convex counter-clockwise polygons ``(N, K, 2)`` outward by
-    ``margin_m`` (scalar or ``(N,)``), mitred, so the result covers the rounded offset.
-
-    Examples
-    --------
-    >>> sq = np.array([[[0, 0], [1, 0], [1, 1], [0, 1]]], float)
-    >>> inflate_convex(sq, 0.5)[0].tolist()
-    [[-0.5, -0.5], [1.5, -0.5], [1.5, 1.5], [-0.5, 1.5]]
-    """
-    p = np.asarray(polys, dtype=float)
-    m = np.broadcast_to(np.asarray(margin_m, dtype=float), p.shape[:1])
-    e = np.roll(p, -1, axis=1) - p
-    elen = np.linalg.norm(e, axis=-1)
-    if np.any(elen <= MIN_EDGE_M):
-        raise ValueError("inflate_convex: polygons must not repeat vertices")
-    n = np.stack([e[..., 1], -e[..., 0]], -1) / elen[..., None]
-    n_prev = np.roll(n, 1, axis=1)
-    miter = (n + n_prev) / (1.0 + _dot(n, n_prev))[..., None]
-    return p + m[:, None, None] * miter
-
-
-def skid_shapes(
-    poses: np.ndarray, corners_body: np.ndarray, *, offset_m, margin_m=0.0
-) -> tuple[np.ndarray, np.ndarray]:
-    """Effective centres and world-frame footprints relative to them, for :func:`orca_step`.
-
-    Parameters
-    ----------
-    poses
-        ``(N, 3)`` pivot poses ``(x, y, yaw)``.
-    corners_body
-        ``(N, K, 2)`` or shared ``(K, 2)`` convex footprint in the body frame (pivot origin),
-        e.g. ``Footprint.corners_body()``.
-    offset_m
-        Distance ``D`` of the effective centre ahead of the pivot (scalar or ``(N,)``).
-    margin_m
-        Enlargement of the footprint, normally :func:`tracking_error_bound`.
-
-    Returns
-    -------
-    centres ``(N, 2)`` and shapes ``(N, K, 2)`` (footprint minus centre, world axes).
-    """
-    poses = _as_array(poses, (-1, 3), "poses")
-    n = poses.shape[0]
-    body = np.asarray(corners_body, dtype=float)
-    body = np.broadcast_to(body, (n, *body.shape)) if body.ndim == 2 else body
-    d = np.broadcast_to(np.asarray(offset_m, dtype=float), (n,))
-    heading = np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], -1)
-    centres = poses[:, :2] + d[:, None] * heading
-    local = inflate_convex(body - np.stack([d, np.zeros(n)], -1)[:, None], margin_m)
-    c, s = heading[:, 0:1], heading[:, 1:2]
-    shapes = np.stack(
-        [c * local[..., 0] - s * local[..., 1], s * local[..., 0] + c * local[..., 1]], -1
-    )
-    return centres, shapes
-
-
-# --------------------------------------------------------------------------------------------
-# non-holonomic conversion: the effective-centre method
-
-
-def holonomic_speed_limit(v_max, omega_max, offset_m):
-    """Largest speed of the effective centre that a unicycle tracks exactly:
-    ``min(v_max, offset_m * omega_max)``."""
-    return np.minimum(np.asarray(v_max, dtype=float), np.asarray(offset_m) * np.asarray(omega_max))
-
-
-def effective_reach(corners_body: np.ndarray, offset_m) -> np.ndarray:
-    """Distance from the effective centre to the farthest footprint corner, ``(N,)``."""
-    body = np.asarray(corners_body, dtype=float)
-    body = body[None] if body.ndim == 2 else body
-    d = np.asarray(offset_m, dtype=float).reshape(-1, 1)
-    return np.hypot(body[..., 0] - d, body[..., 1]).max(axis=-1)
-
-
-def tracking_error_bound(speed_limit, omega_max, reach_m, dt_s):
-    """Bound on how far any footprint point strays from the footprint translated by ``u dt``
-    while a unicycle holds ``holonomic_to_unicycle(u)`` for one step ``dt_s``.
-
-    ``speed_limit * omega_max * dt**2 / 2`` (the effective centre runs on an arc, not a chord)
-    plus ``2 * reach * sin(omega_max * dt / 2)`` (the body turns about the effective centre),
-    valid for ``|u| <= speed_limit <= holonomic_speed_limit(...)``.
-
-    Examples
-    --------
-    >>> round(float(tracking_error_bound(1.0, 1.0, 0.8, 0.1)), 6)
-    0.084967
-    """
-    w_dt = np.minimum(np.asarray(omega_max, dtype=float) * dt_s, np.pi)
-    return np.asarray(speed_limit, dtype=float) * np.asarray(
-        omega_max
-    ) * dt_s**2 / 2.0 + 2.0 * np.asarray(reach_m, dtype=float) * np.sin(w_dt / 2.0)
-
-
-def holonomic_to_unicycle(
-    poses: np.ndarray, vel_xy: np.ndarray, *, offset_m, v_max, omega_max
-) -> tuple[np.ndarray, np.ndarray]:
-    """Forward speed and yaw rate that move the effective centre with ``vel_xy``.
-
-    ``v = u·h`` and ``omega = u·n / offset_m``; where that breaks a limit, ``u`` is scaled
-    down (direction kept) until ``|v| <= v_max`` and ``|omega| <= omega_max``. Exact (no
-    scaling) for ``|u| <= holonomic_speed_limit(v_max, omega_max, offset_m)``.
-
-    Examples
-    --------
-    >>> v, w = holonomic_to_unicycle(np.array([[0.0, 0.0, 0.0]]), np.array([[0.3, 0.4]]),
-    ...                              offset_m=0.5, v_max=1.0, omega_max=1.0)
-    >>> float(v[0]), float(w[0])
-    (0.3, 0.8)
-    """
-    poses = _as_array(poses, (-1, 3), "poses")
-    u = _as_array(vel_xy, (poses.shape[0], 2), "vel_xy")
-    d = np.asarray(offset_m, dtype=float)
-    if np.any(d <= 0):
-        raise ValueError(f"offset_m must be > 0 (got {offset_m!r})")
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    v = u[:, 0] * c + u[:, 1] * s
-    omega = (-u[:, 0] * s + u[:, 1] * c) / d
-    vm = np.broadcast_to(np.asarray(v_max, dtype=float), v.shape)
-    wm = np.broadcast_to(np.asarray(omega_max, dtype=float), v.shape)
-    if np.any(vm <= 0) or np.any(wm <= 0):
-        raise ValueError(f"v_max and omega_max must be > 0 (got {v_max!r}, {omega_max!r})")
-    # One factor for both, so the effective centre keeps its direction.
-    scale = np.minimum(vm / np.maximum(np.abs(v), vm), wm / np.maximum(np.abs(omega), wm))
-    return v * scale, omega * scale
-
-
-def unicycle_to_holonomic(poses: np.ndarray, v, omega, *, offset_m) -> np.ndarray:
-    """Velocity ``(N, 2)`` of the effective centre of unicycles driving with ``(v, omega)``."""
-    poses = _as_array(poses, (-1, 3), "poses")
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    v = np.asarray(v, dtype=float)
-    lat = np.asarray(offset_m, dtype=float) * np.asarray(omega, dtype=float)
-    return np.stack([v * c - lat * s, v * s + lat * c], -1)
-
-
-# --------------------------------------------------------------------------------------------
-# static obstacles
-
-
-def prepare_obstacles(polygons: Sequence) -> StaticObstacles:
-    """Static obstacles from convex polygons (``(k, 2)``, ``k >= 3``) and segments (``(2, 2)``).
-
-    Raises a ValueError naming ``obstacles[i]`` for anything else.
-    """
-    verts, geoms = [], []
-    for i, poly in enumerate(polygons):
-        p = _as_array(poly, (-1, 2), f"obstacles[{i}]")
-        if p.shape[0] < 2:
-            raise ValueError(f"obstacles[{i}]: needs at least 2 points (got {p.tolist()})")
-        if p.shape[0] == 2:
-            if np.linalg.norm(p[1] - p[0]) <= MIN_EDGE_M:
-                raise ValueError(f"obstacles[{i}]: segment of zero length: {p.tolist()}")
-            geoms.append(shapely.LineString(p))
-        else:
-            if _det(p, np.roll(p, -1, axis=0)).sum() < 0:
-                p = p[::-1].copy()
-            try:
-                _check_convex_ccw(p[None], "obstacle")
-            except ValueError:
-                raise ValueError(f"obstacles[{i}]: not a convex polygon: {p.tolist()}") from None
-            if _det(p, np.roll(p, -1, axis=0)).sum() <= 0:
-                raise ValueError(f"obstacles[{i}]: polygon of zero area: {p.tolist()}")
-            geoms.append(shapely.Polygon(p))
-        verts.append(p)
-    k = max((len(v) for v in verts), default=2)
-    padded = np.empty((len(verts), k, 2))
-    for i, v in enumerate(verts):
-        padded[i, : len(v)] = v
-        padded[i, len(v) :] = v[-1]
-    return StaticObstacles(vertices=padded, tree=shapely.STRtree(geoms))
 
 
 # --------------------------------------------------------------------------------------------
@@ -866,6 +516,139 @@ def sweep_hits(region: np.ndarray, displacement: np.ndarray) -> tuple[np.ndarray
         nx, ny, c, real, np.ascontiguousarray(disp[:, 0]), np.ascontiguousarray(disp[:, 1])
     )
     return hit, safety.inside_now(c, real)
+
+
+def _axis_lines(axes, n: int):
+    """Robots held on a line: velocity ``v`` with ``|n . v| <= AXIS_SLACK`` (``n`` its
+    normal), as two opposite hard lines per robot (invalid where the axis is NaN)."""
+    raw_axes = _as_array(np.nan_to_num(np.asarray(axes, dtype=float), nan=0.0), (n, 2), "axes")
+    on = ~np.isnan(np.asarray(axes, dtype=float)).any(axis=1)
+    ax = np.where(on[:, None], raw_axes, [1.0, 0.0])
+    nrm = np.stack([-ax[:, 1], ax[:, 0]], -1) * AXIS_SLACK
+    pt = np.stack([-nrm, nrm], 1)
+    dr = np.stack([ax, -ax], 1)
+    valid = np.repeat(on[:, None], 2, axis=1)
+    return pt[..., 0], pt[..., 1], dr[..., 0], dr[..., 1], valid
+
+
+def _obstacle_lines(obstacles, pos, vel, shp, reach, vmax, speed, dt_s, params):
+    """Static obstacles: hard lines (full share, their own horizon) for the nearest few, and
+    the pairs ``(i, rx, ry)`` the safety filter checks (all within one step)."""
+    n = pos.shape[0]
+    none = (np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
+    step_reach = reach + vmax * dt_s
+    rng = np.maximum(params.time_horizon_obst_s * speed + reach, step_reach)
+    ia, io = obstacles.tree.query(shapely.points(pos), predicate="dwithin", distance=rng)
+    if not ia.size:
+        return None, none
+    dist = shapely.distance(shapely.points(pos[ia]), obstacles.tree.geometries[io])
+    order, rank = _rank_in_group(ia, dist)
+    ia, io, dist = ia[order], io[order], dist[order]
+    region = minkowski_difference(obstacles.vertices[io] - pos[ia, None], shp[ia])
+    block = None
+    keep = rank < params.max_obstacles
+    if keep.any():
+        pt, dr = pair_halfplanes(
+            region[keep],
+            vel[ia[keep]],
+            vel[ia[keep]],
+            np.ones(int(keep.sum())),
+            np.full(int(keep.sum()), 1.0 / params.time_horizon_obst_s),
+            1.0 / dt_s,
+        )
+        block = _scatter(n, int(rank[keep].max()) + 1, ia[keep], rank[keep], pt, dr)
+    near = dist <= step_reach[ia]
+    pairs_near = (
+        ia[near].astype(np.int64),
+        np.ascontiguousarray(region[near, :, 0].T),
+        np.ascontiguousarray(region[near, :, 1].T),
+    )
+    return block, pairs_near
+
+
+def _people_lines(ppos, pvel, prad, pos, pref, shp, reach, speed, inv_dt, params):
+    """People: moving discs that do not react; the robot takes the full share."""
+    n = pos.shape[0]
+    ppos = _as_array(ppos, (-1, 2), "people_positions")
+    n_p = ppos.shape[0]
+    pvel = _as_array(np.zeros((n_p, 2)) if pvel is None else pvel, (n_p, 2), "people_velocities")
+    if prad is None:
+        raise ValueError("people_radii: required with people_positions")
+    prad = _as_array(np.broadcast_to(np.asarray(prad, dtype=float), (n_p,)), (n_p,), "people_radii")
+    if np.any(prad <= 0):
+        raise ValueError(f"people_radii must be > 0 (got {prad.min()!r})")
+    if not n_p:
+        return None
+    k = min(params.max_people, n_p)
+    cut = params.time_horizon_s * (speed.max() + np.linalg.norm(pvel, axis=-1).max()) + (
+        reach.max() + prad.max() / np.cos(np.pi / params.disc_sides)
+    )
+    dist, idx = cKDTree(ppos).query(pos, k=k, distance_upper_bound=cut)
+    dist, idx = dist.reshape(n, k), idx.reshape(n, k)
+    rows, slots = np.nonzero(idx < n_p)
+    if not rows.size:
+        return None
+    j = idx[rows, slots]
+    disc = disc_polygons(ppos[j] - pos[rows], prad[j], params.disc_sides)
+    region = minkowski_difference(disc, shp[rows])
+    # A person does not react, so any tangent of the velocity obstacle is safe; the one
+    # nearest the preferred velocity steps aside instead of only braking in front of a flat
+    # face (the nearest tangent to the current velocity).
+    pt, dr = pair_halfplanes(
+        region,
+        pref[rows] - pvel[j],
+        pref[rows],
+        np.ones(rows.size),
+        np.full(rows.size, 1.0 / params.time_horizon_s),
+        inv_dt,
+        params.leg_preference,
+    )
+    return _scatter(n, k, rows, slots, pt, dr)
+
+
+def _robot_lines(pos, vel, prio, still, shp, reach, vmax, speed, dt_s, params):
+    """Other robots: reciprocal lines, shares by priority (compiled:
+    :func:`.pairs.robot_lines`), and the pairs ``(lo, hi, rx, ry)`` the safety filter
+    checks."""
+    n = pos.shape[0]
+    cut = params.neighbour_dist_m
+    if cut is None:
+        top = np.sort(speed)[-2:].sum()
+        cut = params.time_horizon_s * top + np.sort(reach)[-2:].sum()
+    # Pairs that can touch within one step at the speed limits.
+    near = 2.0 * reach.max() + 2.0 * vmax.max() * dt_s if params.safety_filter else -1.0
+    slots = min(params.max_neighbours + 1, n, params.max_neighbours)
+    nbr, fp = neighbours.grid_neighbours(
+        pos, float(cut) if params.max_neighbours else -1.0, slots, slots, float(near)
+    )
+    # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
+    sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
+    block = None
+    if params.max_neighbours:
+        block = pairs.robot_lines(
+            pos,
+            vel,
+            prio,
+            still,
+            nbr,
+            sx,
+            sy,
+            1.0 / params.time_horizon_s,
+            1.0 / dt_s,
+            float(params.leg_preference),
+            float(params.keep_right),
+            float(params.min_share),
+        )
+        if not block[4].any():
+            block = None
+    robot_pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
+    if params.safety_filter:
+        lo, hi = pairs.canonical_pairs(pos, fp[:, 0].copy(), fp[:, 1].copy())
+        rx, ry = pairs.minkowski_pairs(
+            sx, sy, hi, lo, pos[hi, 0] - pos[lo, 0], pos[hi, 1] - pos[lo, 1]
+        )
+        robot_pairs = (lo, hi, rx, ry)
+    return block, robot_pairs
 
 
 def orca_step(
@@ -949,160 +732,52 @@ def orca_step(
 
     blocks = []
     n_hard = 0
-    # Robots held on a line: velocity ``v`` with ``|n . v| <= AXIS_SLACK`` (``n`` its normal).
     if axes is not None and n:
-        raw_axes = _as_array(np.nan_to_num(np.asarray(axes, dtype=float), nan=0.0), (n, 2), "axes")
-        on = ~np.isnan(np.asarray(axes, dtype=float)).any(axis=1)
-        ax = np.where(on[:, None], raw_axes, [1.0, 0.0])
-        nrm = np.stack([-ax[:, 1], ax[:, 0]], -1) * AXIS_SLACK
-        pt = np.stack([-nrm, nrm], 1)
-        dr = np.stack([ax, -ax], 1)
-        valid = np.repeat(on[:, None], 2, axis=1)
-        blocks.append((pt[..., 0], pt[..., 1], dr[..., 0], dr[..., 1], valid))
+        blocks.append(_axis_lines(axes, n))
         n_hard = 2
-    # Static obstacles: hard constraints, full share, their own horizon.
-    obstacle_pairs = None
+    obstacle_pairs = (np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
     if obstacles is not None and len(obstacles) and n:
-        step_reach = reach + vmax * dt_s
-        rng = np.maximum(params.time_horizon_obst_s * speed + reach, step_reach)
-        ia, io = obstacles.tree.query(shapely.points(pos), predicate="dwithin", distance=rng)
-        if ia.size:
-            dist = shapely.distance(shapely.points(pos[ia]), obstacles.tree.geometries[io])
-            order, rank = _rank_in_group(ia, dist)
-            ia, io, dist = ia[order], io[order], dist[order]
-            region = minkowski_difference(obstacles.vertices[io] - pos[ia, None], shp[ia])
-            # The nearest few constrain ORCA; the safety filter checks all within one step.
-            keep = rank < params.max_obstacles
-            if keep.any():
-                pt, dr = pair_halfplanes(
-                    region[keep],
-                    vel[ia[keep]],
-                    vel[ia[keep]],
-                    np.ones(int(keep.sum())),
-                    np.full(int(keep.sum()), 1.0 / params.time_horizon_obst_s),
-                    inv_dt,
-                )
-                m_obst = int(rank[keep].max()) + 1
-                n_hard += m_obst
-                blocks.append(_scatter(n, m_obst, ia[keep], rank[keep], pt, dr))
-            near = dist <= step_reach[ia]
-            obstacle_pairs = (
-                ia[near],
-                np.ascontiguousarray(region[near, :, 0].T),
-                np.ascontiguousarray(region[near, :, 1].T),
-            )
-
-    # People: moving discs, full share.
+        block, obstacle_pairs = _obstacle_lines(
+            obstacles, pos, vel, shp, reach, vmax, speed, dt_s, params
+        )
+        if block is not None:
+            blocks.append(block)
+            n_hard += block[0].shape[1]
     if people_positions is not None and params.max_people and n:
-        ppos = _as_array(people_positions, (-1, 2), "people_positions")
-        n_p = ppos.shape[0]
-        pvel = _as_array(
-            np.zeros((n_p, 2)) if people_velocities is None else people_velocities,
-            (n_p, 2),
-            "people_velocities",
+        block = _people_lines(
+            people_positions,
+            people_velocities,
+            people_radii,
+            pos,
+            pref,
+            shp,
+            reach,
+            speed,
+            inv_dt,
+            params,
         )
-        if people_radii is None:
-            raise ValueError("people_radii: required with people_positions")
-        prad = _as_array(
-            np.broadcast_to(np.asarray(people_radii, dtype=float), (n_p,)), (n_p,), "people_radii"
-        )
-        if np.any(prad <= 0):
-            raise ValueError(f"people_radii must be > 0 (got {prad.min()!r})")
-        if n_p:
-            k = min(params.max_people, n_p)
-            cut = params.time_horizon_s * (speed.max() + np.linalg.norm(pvel, axis=-1).max()) + (
-                reach.max() + prad.max() / np.cos(np.pi / params.disc_sides)
-            )
-            dist, idx = cKDTree(ppos).query(pos, k=k, distance_upper_bound=cut)
-            dist, idx = dist.reshape(n, k), idx.reshape(n, k)
-            rows, slots = np.nonzero(idx < n_p)
-            if rows.size:
-                j = idx[rows, slots]
-                disc = disc_polygons(ppos[j] - pos[rows], prad[j], params.disc_sides)
-                region = minkowski_difference(disc, shp[rows])
-                # A person does not react, so any tangent of the velocity obstacle is safe;
-                # the one nearest the preferred velocity steps aside instead of only braking
-                # in front of a flat face (the nearest tangent to the current velocity).
-                pt, dr = pair_halfplanes(
-                    region,
-                    pref[rows] - pvel[j],
-                    pref[rows],
-                    np.ones(rows.size),
-                    np.full(rows.size, 1.0 / params.time_horizon_s),
-                    inv_dt,
-                    params.leg_preference,
-                )
-                blocks.append(_scatter(n, k, rows, slots, pt, dr))
-
-    # Other robots: reciprocal, shares by priority (compiled, :func:`.pairs.robot_lines`).
+        if block is not None:
+            blocks.append(block)
     robot_pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
     if n > 1:
-        cut = params.neighbour_dist_m
-        if cut is None:
-            top = np.sort(speed)[-2:].sum()
-            cut = params.time_horizon_s * top + np.sort(reach)[-2:].sum()
-        # Pairs that can touch within one step at the speed limits.
-        near = 2.0 * reach.max() + 2.0 * vmax.max() * dt_s if params.safety_filter else -1.0
-        slots = min(params.max_neighbours + 1, n, params.max_neighbours)
-        nbr, fp = neighbours.grid_neighbours(
-            pos, float(cut) if params.max_neighbours else -1.0, slots, slots, float(near)
+        block, robot_pairs = _robot_lines(
+            pos, vel, prio, still, shp, reach, vmax, speed, dt_s, params
         )
-        # Vertex-major shapes (K, N): the kernels loop over a few vertices, not pairs.
-        sx, sy = np.ascontiguousarray(shp[..., 0].T), np.ascontiguousarray(shp[..., 1].T)
-        if params.max_neighbours:
-            lines = pairs.robot_lines(
-                pos,
-                vel,
-                prio,
-                still,
-                nbr,
-                sx,
-                sy,
-                1.0 / params.time_horizon_s,
-                float(inv_dt),
-                float(params.leg_preference),
-                float(params.keep_right),
-                float(params.min_share),
-            )
-            if lines[4].any():
-                blocks.append(lines)
-        if params.safety_filter:
-            lo, hi = pairs.canonical_pairs(pos, fp[:, 0].copy(), fp[:, 1].copy())
-            rx, ry = pairs.minkowski_pairs(
-                sx, sy, hi, lo, pos[hi, 0] - pos[lo, 0], pos[hi, 1] - pos[lo, 1]
-            )
-            robot_pairs = (lo, hi, rx, ry)
+        if block is not None:
+            blocks.append(block)
 
     if blocks:
         px, py, dx, dy, valid = (np.concatenate([b[f] for b in blocks], axis=1) for f in range(5))
     else:
-        px, py, dx, dy = (np.zeros((n, 0)) for _ in range(4))
-        dx = np.ones((n, 0))
+        px, py, dx, dy = np.zeros((n, 0)), np.zeros((n, 0)), np.ones((n, 0)), np.zeros((n, 0))
         valid = np.zeros((n, 0), dtype=bool)
     halfplanes = HalfPlanes(
         point=np.stack([px, py], -1), direction=np.stack([dx, dy], -1), valid=valid, n_hard=n_hard
     )
-
-    out = np.zeros((n, 2))
-    infeasible = np.zeros(n, dtype=bool)
-    move = np.flatnonzero(~still)
-    if move.size == n:
-        out, infeasible = _solve(px, py, dx, dy, valid, n_hard, pref, vmax, params.slowest_fallback)
-    elif move.size:
-        out[move], infeasible[move] = _solve(
-            px[move],
-            py[move],
-            dx[move],
-            dy[move],
-            valid[move],
-            n_hard,
-            pref[move],
-            vmax[move],
-            params.slowest_fallback,
-        )
+    out, infeasible = _solve_moving(
+        (px, py, dx, dy, valid), n_hard, still, pref, vmax, params.slowest_fallback
+    )
     slowed = np.zeros(n, dtype=bool)
     if params.safety_filter and n:
-        if obstacle_pairs is None:
-            obstacle_pairs = (np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0)))
         out, slowed = safety.safety_filter(out, float(dt_s), *robot_pairs, *obstacle_pairs)
     return OrcaResult(velocities=out, infeasible=infeasible, halfplanes=halfplanes, slowed=slowed)

@@ -262,10 +262,24 @@ def _vo_one(rx, ry, p, wxp, wyp, inv_horizon, inv_dt, leg_preference, keep_right
     if inside:
         return -s_in * nix, -s_in * niy, nix, niy, True
 
-    # Outside: project on the boundary pieces (edges facing away are never closer).
+    ux, uy, nox, noy = _vo_outside(
+        rx, ry, p, wxp, wyp, inv, colliding, ex, ey, lux, luy, lx, ly, gux, guy, gx, gy
+    )
+    # On the boundary itself the facet normal found above is the outward normal.
+    if nox != nox:
+        return ux, uy, nix, niy, False
+    return ux, uy, nox, noy, False
+
+
+@njit(cache=True)
+def _vo_outside(rx, ry, p, wxp, wyp, inv, colliding, ex, ey, lux, luy, lx, ly, gux, guy, gx, gy):
+    """Relative velocity outside the obstacle: the move ``u`` to the nearest boundary point
+    (edges of the cut-off polygon or, without collision, the legs) and the normal there
+    (NaN when the velocity is on the boundary itself)."""
+    # Edges facing away lie inside the obstacle and are never closer: try all.
     best = 0.0
     bx = by = 0.0
-    for v in range(n_v):
+    for v in range(rx.shape[0]):
         qx, qy = rx[v, p] * inv, ry[v, p] * inv
         esx, esy = ex[v] * inv, ey[v] * inv
         t = ((wxp - qx) * esx + (wyp - qy) * esy) / max(esx * esx + esy * esy, 1e-300)
@@ -287,11 +301,10 @@ def _vo_one(rx, ry, p, wxp, wyp, inv_horizon, inv_dt, leg_preference, keep_right
                 best, bx, by = dr, cxr, cyr
     awx, awy = wxp - bx, wyp - by
     dist = np.sqrt(awx * awx + awy * awy)
-    # On the boundary itself the facet normal found above is the outward normal.
     if dist > 1e-12:
         inv_d = 1.0 / max(dist, 1e-12)
-        return bx - wxp, by - wyp, awx * inv_d, awy * inv_d, False
-    return bx - wxp, by - wyp, nix, niy, False
+        return bx - wxp, by - wyp, awx * inv_d, awy * inv_d
+    return bx - wxp, by - wyp, np.nan, np.nan
 
 
 @njit(cache=True, inline="always")
