@@ -208,6 +208,8 @@ def _with_peers(row: dict, quick: bool) -> list[dict]:
     from swarmpark.apps.bench import peers
 
     out = [row]
+    # The skids' overlap on the same scale as the peers' (rectangles, not discs).
+    row["max_overlap_m"] = max(0.0, -row["min_gap_m"])
     for name, run in (("pyrvo", peers.run_pyrvo), ("navground", peers.run_navground)):
         if not peers.available(name):
             row[f"x_{name}"] = "not installed"
