@@ -93,6 +93,7 @@ from swarmpark.control.orca.shapes import (
     tracking_error_bound,
     unicycle_to_holonomic,
 )
+from swarmpark.core.geometry import TOUCH_TOLERANCE_M
 
 __all__ = [
     "OrcaParams",
@@ -513,9 +514,15 @@ def sweep_hits(region: np.ndarray, displacement: np.ndarray) -> tuple[np.ndarray
         np.ascontiguousarray(q[..., 0].T), np.ascontiguousarray(q[..., 1].T)
     )
     hit = safety.sweep(
-        nx, ny, c, real, np.ascontiguousarray(disp[:, 0]), np.ascontiguousarray(disp[:, 1])
+        nx,
+        ny,
+        c,
+        real,
+        np.ascontiguousarray(disp[:, 0]),
+        np.ascontiguousarray(disp[:, 1]),
+        TOUCH_TOLERANCE_M,
     )
-    return hit, safety.inside_now(c, real)
+    return hit, safety.inside_now(c, real, TOUCH_TOLERANCE_M)
 
 
 def _axis_lines(axes, n: int):
@@ -779,5 +786,7 @@ def orca_step(
     )
     slowed = np.zeros(n, dtype=bool)
     if params.safety_filter and n:
-        out, slowed = safety.safety_filter(out, float(dt_s), *robot_pairs, *obstacle_pairs)
+        out, slowed = safety.safety_filter(
+            out, float(dt_s), *robot_pairs, *obstacle_pairs, TOUCH_TOLERANCE_M
+        )
     return OrcaResult(velocities=out, infeasible=infeasible, halfplanes=halfplanes, slowed=slowed)

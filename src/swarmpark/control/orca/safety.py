@@ -12,8 +12,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from swarmpark.core.geometry import TOUCH_TOLERANCE_M
-
 __all__ = ["SAFETY_HALVINGS", "edge_planes", "sweep", "inside_now", "safety_filter"]
 
 #: Edges shorter than this (metres) are padding or round-off, not edges.
@@ -45,15 +43,16 @@ def edge_planes(rx, ry):
 
 
 @njit(cache=True, inline="always")
-def _sweep_one(nx, ny, c, real, p, dx, dy):
-    """Whether ``t * (dx, dy)``, ``0 <= t <= 1``, enters the interior of region ``p``."""
+def _sweep_one(nx, ny, c, real, p, dx, dy, tol):
+    """Whether ``t * (dx, dy)``, ``0 <= t <= 1``, enters the interior of region ``p`` by more
+    than ``tol``."""
     t_hi, t_lo = 1.0, 0.0
     for v in range(nx.shape[0]):
         if not real[v, p]:
             continue
         # Inside edge e at time t: t * (n_e . d) < c_e - tol (touching is not a hit).
         a = nx[v, p] * dx + ny[v, p] * dy
-        b = c[v, p] - TOUCH_TOLERANCE_M
+        b = c[v, p] - tol
         if abs(a) <= FLAT:
             if b <= 0.0:
                 return False
@@ -65,43 +64,45 @@ def _sweep_one(nx, ny, c, real, p, dx, dy):
 
 
 @njit(cache=True)
-def sweep(nx, ny, c, real, dx, dy):
+def sweep(nx, ny, c, real, dx, dy, tol):
     """:func:`_sweep_one` for every region ``p`` with displacement ``(dx[p], dy[p])``."""
     n_p = nx.shape[1]
     out = np.empty(n_p, np.bool_)
     for p in range(n_p):
-        out[p] = _sweep_one(nx, ny, c, real, p, dx[p], dy[p])
+        out[p] = _sweep_one(nx, ny, c, real, p, dx[p], dy[p], tol)
     return out
 
 
 @njit(cache=True)
-def inside_now(c, real):
+def inside_now(c, real, tol):
     """Whether the origin lies in the interior of each region (the shapes overlap now)."""
     n_v, n_p = c.shape
     out = np.ones(n_p, np.bool_)
     for p in range(n_p):
         for v in range(n_v):
-            if real[v, p] and c[v, p] - TOUCH_TOLERANCE_M <= 0.0:
+            if real[v, p] and c[v, p] - tol <= 0.0:
                 out[p] = False
                 break
     return out
 
 
 @njit(cache=True)
-def safety_filter(vel, dt, i, j, rx, ry, io, ox, oy):
+def safety_filter(vel, dt, i, j, rx, ry, io, ox, oy, tol):
     """Slow robots whose straight one-step motions overlap (``OrcaParams.safety_filter``).
 
     ``(i, j, rx, ry)``: every robot pair that can meet within one step (regions
     vertex-major); ``(io, ox, oy)`` the same for robot and static obstacle. Scales only go
     down and a stopped pair that does not overlap now is safe, so the loop ends; pairs that
-    overlap already are left to ORCA's separating constraints. Returns the new velocities
-    and which robots were slowed.
+    overlap already are left to ORCA's separating constraints. ``tol``: touching closer than
+    this is not a hit (``TOUCH_TOLERANCE_M``; an argument, not a global, so the on-disk
+    compiled code never keeps a stale value). Returns the new velocities and which robots
+    were slowed.
     """
     n = vel.shape[0]
     nx, ny, c, real = edge_planes(rx, ry)
     onx, ony, oc, oreal = edge_planes(ox, oy)
-    free = ~inside_now(c, real)
-    o_free = ~inside_now(oc, oreal)
+    free = ~inside_now(c, real, tol)
+    o_free = ~inside_now(oc, oreal, tol)
     scale = np.ones(n)
     bad = np.zeros(n, np.bool_)
     halvings = 0
@@ -113,7 +114,7 @@ def safety_filter(vel, dt, i, j, rx, ry, io, ox, oy):
                 continue
             dx = (vel[a, 0] * scale[a] - vel[b, 0] * scale[b]) * dt
             dy = (vel[a, 1] * scale[a] - vel[b, 1] * scale[b]) * dt
-            if _sweep_one(nx, ny, c, real, p, dx, dy):
+            if _sweep_one(nx, ny, c, real, p, dx, dy, tol):
                 bad[a] = True
                 bad[b] = True
         for p in range(io.shape[0]):
@@ -121,7 +122,7 @@ def safety_filter(vel, dt, i, j, rx, ry, io, ox, oy):
             if not o_free[p] or scale[a] <= 0:
                 continue
             if _sweep_one(
-                onx, ony, oc, oreal, p, vel[a, 0] * scale[a] * dt, vel[a, 1] * scale[a] * dt
+                onx, ony, oc, oreal, p, vel[a, 0] * scale[a] * dt, vel[a, 1] * scale[a] * dt, tol
             ):
                 bad[a] = True
         any_bad = False
