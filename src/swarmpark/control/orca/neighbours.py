@@ -16,6 +16,8 @@ __all__ = ["grid_neighbours"]
 
 #: The grid never has more than this many buckets per robot (bigger buckets instead).
 MAX_BUCKETS_PER_ROBOT = 16
+#: Relative widening of squared-distance pre-tests (round-off is ~1e-16).
+SLACK = 1.0 + 1e-9
 
 
 @njit(cache=True)
@@ -81,6 +83,8 @@ def grid_neighbours(pos, cut, n_slots, max_nb, near):
     cj = np.empty(m + 1, np.int64)
     pairs = np.empty((16, 2), np.int64)
     n_pairs = 0
+    near2 = near * near * SLACK if near >= 0 else -1.0
+    cut2 = cut * cut * SLACK if cut > 0 else -1.0
     for i in range(n):
         px, py = pos[i, 0], pos[i, 1]
         bx = min(int((px - x0) / size), gx - 1)
@@ -94,7 +98,15 @@ def grid_neighbours(pos, cut, n_slots, max_nb, near):
                     if j == i:
                         continue
                     dx, dy = pos[j, 0] - px, pos[j, 1] - py
-                    d = np.sqrt(dx * dx + dy * dy)
+                    d2 = dx * dx + dy * dy
+                    # Squared bounds widened by far more than round-off only skip the
+                    # square root where the exact tests below would reject anyway.
+                    if not (
+                        (j > i and d2 <= near2)
+                        or (m > 0 and d2 <= cut2 and (cnt < m or d2 <= cd[m - 1] ** 2 * SLACK))
+                    ):
+                        continue
+                    d = np.sqrt(d2)
                     if j > i and d <= near:
                         if n_pairs == pairs.shape[0]:
                             grown = np.empty((2 * n_pairs, 2), np.int64)
