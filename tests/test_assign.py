@@ -14,6 +14,7 @@ from swarmpark.assign import (
     cost_matrix,
     footprint_fits,
     reassign,
+    sparse_assign,
 )
 
 points = st.lists(st.tuples(st.floats(0, 20), st.floats(0, 20)), min_size=1, max_size=6)
@@ -84,3 +85,49 @@ def test_goals_go_only_to_skids_that_fit():
 def test_more_robots_than_goals_is_an_error():
     with pytest.raises(AssignmentError, match="3 robots but only 2 goals"):
         assign(np.zeros((3, 2)))
+
+
+@pytest.mark.parametrize("layout", ["uniform", "cluster-to-grid"])
+def test_sparse_k_nearest_assignment_is_within_one_percent_of_the_dense_optimum(layout):
+    rng = np.random.default_rng(7)
+    n = 400
+    if layout == "uniform":
+        robots, goals = rng.uniform(0, 60, (n, 2)), rng.uniform(0, 60, (n, 2))
+    else:
+        gx, gy = np.meshgrid(np.arange(20) * 1.6, np.arange(20) * 1.0)
+        goals = np.stack([gx.ravel(), gy.ravel()], -1) + [80.0, 0.0]
+        robots = rng.normal(0.0, 8.0, (n, 2))
+    c = cost_matrix(robots, goals, "formation")
+    idx = np.arange(n)
+    dense = c[idx, assign(c)].sum()
+    got = sparse_assign(c, k=10)
+    assert sorted(got.tolist()) == list(range(n))
+    assert dense <= c[idx, got].sum() <= 1.01 * dense
+
+
+def test_sparse_assignment_falls_back_to_dense_and_keeps_fits():
+    # Every robot's favourite is goal 0 and robot 0 is every goal's: the 1-nearest graph
+    # has no full matching (robots 1 and 2 only reach goal 0), so the dense solve answers.
+    c = np.array([[0.0, 9.0, 9.0], [0.0, 9.5, 9.5], [0.0, 9.5, 9.5]])
+    got = sparse_assign(c, k=1)
+    assert sorted(got.tolist()) == [0, 1, 2]
+    assert c[np.arange(3), got].sum() == pytest.approx(18.5)
+    # A pair marked infeasible (footprint does not fit) is never used.
+    fits = np.ones((3, 4), bool)
+    fits[0, 0] = False
+    c2 = cost_matrix(
+        np.zeros((3, 2)), np.array([[0, 0], [1, 0], [2, 0], [3, 0]], float), "euclidean", fits=fits
+    )
+    assert sparse_assign(c2, k=2)[0] != 0
+    with pytest.raises(ValueError, match="k must be >= 1"):
+        sparse_assign(c2, k=0)
+
+
+def test_cost_matrix_values_are_the_broadcast_norms():
+    rng = np.random.default_rng(3)
+    r, g = rng.uniform(-50, 50, (30, 2)), rng.uniform(-50, 50, (40, 2))
+    ref = np.linalg.norm(r[:, None] - g[None], axis=-1)
+    assert np.array_equal(cost_matrix(r, g, "euclidean"), ref)
+    shifted = r - r.mean(axis=0) + g.mean(axis=0)
+    form = np.linalg.norm(shifted[:, None] - g[None], axis=-1) + 1e-2 * ref
+    assert np.array_equal(cost_matrix(r, g, "formation"), form)

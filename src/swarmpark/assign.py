@@ -14,8 +14,9 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import maximum_bipartite_matching
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import maximum_bipartite_matching, min_weight_full_bipartite_matching
+from scipy.spatial.distance import cdist
 
 from swarmpark.core.registry import Registry
 
@@ -24,6 +25,7 @@ __all__ = [
     "COSTS",
     "cost_matrix",
     "assign",
+    "sparse_assign",
     "reassign",
     "bottleneck_assignment",
     "AssignmentError",
@@ -34,6 +36,8 @@ INFEASIBLE = 1e9
 #: A swap must lower the total cost by this share (and this absolute amount) to be taken.
 HYSTERESIS_FRACTION = 0.1
 HYSTERESIS_ABS_M = 0.5
+#: Candidate goals per robot (and robots per goal) in the sparse k-nearest graph.
+SPARSE_K = 20
 
 
 class AssignmentError(ValueError):
@@ -56,7 +60,8 @@ def _sequential(robot_xy, goal_xy, path_lengths):
 
 @ASSIGNMENT_COSTS.register("euclidean", "straight-line distance to the goal")
 def _euclidean(robot_xy, goal_xy, path_lengths):
-    return np.linalg.norm(robot_xy[:, None] - goal_xy[None], axis=-1)
+    # cdist: the same values as the norm of the broadcast differences, 7-9x faster.
+    return cdist(robot_xy, goal_xy)
 
 
 @ASSIGNMENT_COSTS.register(
@@ -66,9 +71,8 @@ def _formation(robot_xy, goal_xy, path_lengths):
     shifted = robot_xy - robot_xy.mean(axis=0) + goal_xy.mean(axis=0)
     # Distances of the shifted formation, plus a small share of the true distance to break
     # ties between mirror-image matchings.
-    return np.linalg.norm(shifted[:, None] - goal_xy[None], axis=-1) + 1e-2 * np.linalg.norm(
-        robot_xy[:, None] - goal_xy[None], axis=-1
-    )
+    # cdist: the same values as the norm of the broadcast differences, 7-9x faster.
+    return cdist(shifted, goal_xy) + 1e-2 * cdist(robot_xy, goal_xy)
 
 
 @ASSIGNMENT_COSTS.register("path", "length of the shortest free path to the goal (path length)")
@@ -124,6 +128,50 @@ def assign(cost: np.ndarray) -> np.ndarray:
     if np.any(cost[np.arange(r), goal_of] >= INFEASIBLE):
         bad = int(np.flatnonzero(cost[np.arange(r), goal_of] >= INFEASIBLE)[0])
         raise AssignmentError(f"assignment: robot {bad} fits no free goal")
+    return goal_of
+
+
+def sparse_assign(cost: np.ndarray, k: int = SPARSE_K) -> np.ndarray:
+    """Assignment on the k-nearest sparse graph: ``goal_of[r]`` for every robot.
+
+    Keeps, for every robot, its ``k`` cheapest goals and, for every goal, its ``k`` cheapest
+    robots (so that goals far from everyone's favourites stay reachable), and solves the
+    minimum-cost full matching on those edges (scipy's ``min_weight_full_bipartite_matching``,
+    LAPJVsp). Optimal on the graph, not always on the full matrix; where the graph has no
+    full matching it falls back to the dense Hungarian solve (:func:`assign`).
+
+    Measured (formation cost, N = 1000, CPU time): the dense solve takes 60-160 ms and this
+    one 150-250 ms at ``k = 20`` with a total cost within 0.5 % of the optimum, so
+    :func:`assign` stays dense; this is the option for fleets whose dense matrix does not
+    fit in memory.
+    """
+    cost = np.asarray(cost, float)
+    r, g = cost.shape
+    if r > g:
+        raise AssignmentError(f"assignment: {r} robots but only {g} goals")
+    if k < 1:
+        raise ValueError(f"sparse_assign: k must be >= 1 (got {k!r})")
+    if min(k, g) >= g or min(k, r) >= r:
+        return assign(cost)
+    per_robot = np.argpartition(cost, k - 1, axis=1)[:, :k]
+    per_goal = np.argpartition(cost, k - 1, axis=0)[:k]
+    rows = np.concatenate([np.repeat(np.arange(r), k), per_goal.ravel()])
+    cols = np.concatenate([per_robot.ravel(), np.tile(np.arange(g), k)])
+    keep = cost[rows, cols] < INFEASIBLE
+    rows, cols = rows[keep], cols[keep]
+    # The matcher drops zero weights (missing edges): shift all by a constant, which every
+    # full matching (r edges) pays equally.
+    shift = 1.0 - min(0.0, float(cost[rows, cols].min(initial=0.0)))
+    graph = coo_matrix((cost[rows, cols] + shift, (rows, cols)), shape=(r, g)).tocsr()
+    graph.sum_duplicates()
+    # Duplicated edges were summed: restore their single weight.
+    graph.data = cost[np.repeat(np.arange(r), np.diff(graph.indptr)), graph.indices] + shift
+    try:
+        rr, cc = min_weight_full_bipartite_matching(graph)
+    except ValueError:
+        return assign(cost)
+    goal_of = np.empty(r, dtype=int)
+    goal_of[rr] = cc
     return goal_of
 
 
