@@ -205,7 +205,15 @@ def build_world(scn: Scenario) -> World:
     _check_start_poses(world)
     _check_commands(world)
     _check_kidnaps(world)
+    _check_faults(world)
     return world
+
+
+def _check_faults(world: World) -> None:
+    ids = world.ids
+    for k, fault in enumerate(world.scenario.faults):
+        if fault.robot not in ids:
+            raise ScenarioError(f"faults[{k}].robot: unknown robot (got {fault.robot!r})")
 
 
 def _check_kidnaps(world: World) -> None:

@@ -25,6 +25,7 @@ __all__ = [
     "RobotConfig",
     "Person",
     "KidnapSpec",
+    "FaultSpec",
     "load_scenario",
     "parse_scenario",
     "build_world",
@@ -215,6 +216,29 @@ class SensingSpec(_Model):
     kidnap: list[KidnapSpec] = []
 
 
+class FaultSpec(_Model):
+    """A fault injected on the simulator's link to one robot (not in the robot itself), from
+    ``from_s`` to ``to_s``: ``drop`` loses every message to and from it, ``delay_s`` delivers
+    them that late (so they may arrive out of order), ``noise_m`` / ``noise_deg`` add Gaussian
+    noise (standard deviations) to the poses it reports. The e-stop is not affected."""
+
+    robot: str
+    from_s: NonNegFloat
+    to_s: PositiveFloat
+    drop: bool = False
+    delay_s: NonNegFloat = 0.0
+    noise_m: NonNegFloat = 0.0
+    noise_deg: NonNegFloat = 0.0
+
+    @model_validator(mode="after")
+    def _window_and_effect(self) -> FaultSpec:
+        if self.to_s <= self.from_s:
+            raise ValueError(f"to_s must be after from_s {self.from_s} (got {self.to_s})")
+        if not (self.drop or self.delay_s > 0 or self.noise_m > 0 or self.noise_deg > 0):
+            raise ValueError("a fault needs drop, delay_s, noise_m or noise_deg")
+        return self
+
+
 class Scenario(_Model):
     name: str
     seed: int = 0
@@ -227,6 +251,8 @@ class Scenario(_Model):
     commands: list[CommandSpec] = []
     navigation: NavigationSpec = NavigationSpec()
     sensing: SensingSpec = SensingSpec()
+    #: Faults injected on the simulator's robot link (drops, delays, noise).
+    faults: list[FaultSpec] = []
     expect: ExpectSpec = ExpectSpec()
 
 
