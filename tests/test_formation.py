@@ -8,13 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmpark.control.formation.paper import (
-    experiment_problem,
-    paper_problem,
-    run_obstacle_experiment,
-    run_paper,
-)
-from swarmpark.control.formation.planner import (
+from swarmpark.control.formation import (
     FormationProblem,
     OnlineAdjuster,
     TrackingGains,
@@ -29,6 +23,12 @@ from swarmpark.control.formation.planner import (
     sample_reference,
     track_unicycle,
 )
+from swarmpark.control.formation.paper import (
+    experiment_problem,
+    paper_problem,
+    run_obstacle_experiment,
+)
+from swarmpark.control.formation.paper_report import run_paper
 from swarmpark.core.paths import SplinePath
 
 TOL_V = 1e-9  # speeds are clipped to their bounds after the solve

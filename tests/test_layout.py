@@ -330,7 +330,7 @@ def test_potential_iteration_cap_is_reported():
     region = make_region([[0, 0], [12, 0], [12, 9], [0, 9]], None, 0.0, 0.3)
     skids = make_skids([SKID] * 20)
     start = stacking.stack(region, skids).centres
-    centres, info = potential.spread(region, skids, start, max_iterations=3)
+    centres, info = potential.spread(region, skids, start, max_iterations=3, relocations=0)
     assert info["iterations"] == 3 and not info["converged"]
     assert "iteration cap 3" in info["notices"][0]
     _, info_v = potential.spread(region, skids, start, variant="vertex", max_iterations=5)
@@ -493,3 +493,27 @@ def test_property_convex_valid_or_clear_error(boundary, n, length, width, headin
         assert f"only {exc.fits} of {n} skids" in str(exc)
         return
     independent_check(res, [fp] * n, boundary, margin)
+
+
+def test_potential_spreads_the_skids_beyond_the_packed_stacking_layout():
+    """2018 Sect. 3.2.2: the field pushes the goals apart to fill the boundary. The plain
+    descent from stacking stops packed (a column of five held by equal pushes: closest pair
+    at the 0.3 m margin); the relocation moves reach a spread layout."""
+    from swarmpark.layout import potential, stacking
+    from swarmpark.layout.region import make_region, make_skids
+
+    room = [[0, 0], [8, 0], [8, 6], [0, 6]]
+    fps = [SKID] * 9
+    stack = layout(room, fps, method="stacking", heading=0.0)
+    spread = layout(room, fps, method="potential", heading=0.0)
+    assert stack.report["min_spacing_m"] < 0.31
+    assert spread.report["min_spacing_m"] > 0.5
+    assert spread.report["relocations"] >= 1
+    assert spread.report["energy_final"] < spread.report["energy_initial"]
+    independent_check(spread, fps, room, 0.3)
+    region = make_region(room, None, 0.0, 0.3)
+    skids = make_skids(fps)
+    start = stacking.stack(region, skids).centres
+    plain, info = potential.spread(region, skids, start, relocations=0)
+    full, info_full = potential.spread(region, skids, start)
+    assert info_full["energy_final"] < info["energy_final"]

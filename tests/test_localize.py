@@ -11,19 +11,19 @@ from shapely.geometry import box
 
 from swarmpark.core.geometry import Footprint, footprint_corners, wrap_angle
 from swarmpark.core.gridmap import grid_from_walls
-from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
-from swarmpark.sense.localize import (
+from swarmpark.sense.amcl import (
     RECOVERY,
     FilterConfig,
     FleetLocalizer,
     LikelihoodField,
-    OdometryDrift,
     ParticleFilter,
     kld_sample_count,
     low_variance_resample,
     pose_error_summary,
     relative_motion,
 )
+from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
+from swarmpark.sim.odometry import OdometryDrift
 
 ROUTE_A = [[1, 3.5], [4.5, 4.3], [7, 4.2], [7, 2.2], [4, 1.5]]
 ROUTE_B = [[3.2, 3], [1, 2.6], [1, 1], [1, 3.5], [4.5, 4.3]]

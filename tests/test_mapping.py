@@ -11,15 +11,16 @@ from shapely.geometry import box
 
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import OccupancyGrid, grid_from_walls, load_map_yaml, save_map_yaml
+from swarmpark.sense.agreement import map_agreement
+from swarmpark.sense.amcl import LikelihoodField, ParticleFilter
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
-from swarmpark.sense.localize import LikelihoodField, OdometryDrift, ParticleFilter
 from swarmpark.sense.mapping import (
     GridMapper,
     MapperConfig,
     compose,
-    map_agreement,
     relative_pose,
 )
+from swarmpark.sim.odometry import OdometryDrift
 
 LOOP = [[1, 3.5], [4.5, 4.3], [7, 4.2], [7, 2.2], [4, 1.5], [3.2, 3], [1, 2.6], [1, 1], [1, 3.5]]
 SPEC = LidarSpec(range_noise_std_m=0.01)

@@ -23,6 +23,7 @@ MOVED = {
     "swarmpark.control.navigate": "swarmpark.control.nav.navigator",
     "swarmpark.control.formation_paper": "swarmpark.control.formation.paper",
     "swarmpark.control.formation_run": "swarmpark.control.formation.run",
+    "swarmpark.sense.localize": "swarmpark.sense.amcl",
 }
 
 

@@ -162,7 +162,7 @@ def cmd_formation(args) -> int:
     """Reproduce Liu, Sun and Zhu (2010): formation errors of three methods, the obstacle run."""
     if not args.paper:
         return _fail("formation: only --paper is available (the paper's experiments)")
-    from swarmpark.control.formation.paper import run_paper
+    from swarmpark.control.formation.paper_report import run_paper
 
     out = run_paper(Path(args.out))
     print(json.dumps(out, indent=2, default=str))

@@ -14,9 +14,10 @@ import numpy as np
 
 from swarmpark.core.geometry import pad_polygons, triangulate
 from swarmpark.core.gridmap import save_map_yaml
+from swarmpark.sense.agreement import map_agreement
 from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
-from swarmpark.sense.localize import OdometryDrift
-from swarmpark.sense.mapping import GridMapper, map_agreement
+from swarmpark.sense.mapping import GridMapper
+from swarmpark.sim.odometry import OdometryDrift
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import World
 

@@ -8,6 +8,7 @@ treated as occupied.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,6 +18,13 @@ import yaml
 from PIL import Image
 from scipy import ndimage
 from shapely.geometry import Polygon, box
+
+from swarmpark.core.limits import (
+    MIN_RESOLUTION_M,
+    check_grid_cells,
+    finite_float,
+    finite_sequence,
+)
 
 __all__ = ["OccupancyGrid", "MapError", "load_map_yaml", "save_map_yaml", "grid_from_walls"]
 
@@ -56,8 +64,11 @@ class OccupancyGrid:
         if self.unknown is None:
             self.unknown = np.zeros_like(self.occupied)
         self.unknown = np.asarray(self.unknown, dtype=bool) & ~self.occupied
-        if not self.resolution_m > 0:
-            raise MapError(f"map.resolution_m must be > 0 (got {self.resolution_m})")
+        if self.occupied.ndim != 2:
+            raise MapError(f"map: the grid must be 2-D (got shape {self.occupied.shape})")
+        check_grid_cells(self.occupied.shape, "map", error=MapError)
+        finite_float(self.resolution_m, "map.resolution_m", lo=MIN_RESOLUTION_M, error=MapError)
+        self.origin = tuple(finite_sequence(self.origin, "map.origin", length=2, error=MapError))
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -207,12 +218,12 @@ def grid_from_walls(
     origin: tuple[float, float] = (0.0, 0.0),
 ) -> OccupancyGrid:
     """An occupancy grid of the given size with polygon walls rasterized into it."""
-    w, h = size_m
+    w, h = finite_sequence(list(size_m), "map.size_m", length=2, error=MapError)
     if not (w > 0 and h > 0):
         raise MapError(f"map.size_m must be positive (got {list(size_m)})")
-    if not resolution_m > 0:
-        raise MapError(f"map.resolution_m must be > 0 (got {resolution_m})")
+    finite_float(resolution_m, "map.resolution_m", lo=MIN_RESOLUTION_M, error=MapError)
     shape = (int(round(h / resolution_m)), int(round(w / resolution_m)))
+    check_grid_cells(shape, "map", error=MapError)
     grid = OccupancyGrid(np.zeros(shape, dtype=bool), resolution_m, origin)
     return grid.with_polygons(walls)
 
@@ -226,9 +237,14 @@ def load_map_yaml(path: str | Path) -> OccupancyGrid:
     if not path.is_file():
         raise MapError(f"map.yaml: file not found: {str(path)!r}")
     try:
-        meta = yaml.safe_load(path.read_text())
+        meta = yaml.safe_load(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise MapError(f"map.yaml: {str(path)!r} is not UTF-8 text ({exc.reason})") from None
     except yaml.YAMLError as exc:
-        raise MapError(f"map.yaml: {str(path)!r} is not valid YAML: {exc}") from exc
+        reason = " ".join(str(exc).split())  # PyYAML's message spans lines: keep one
+        raise MapError(f"map.yaml: {str(path)!r} is not valid YAML: {reason}") from None
+    except RecursionError:
+        raise MapError(f"map.yaml: {str(path)!r} is nested too deeply") from None
     if not isinstance(meta, dict):
         raise MapError(f"map.yaml: {str(path)!r} must be a mapping of map_server keys")
     for key in ("image", "resolution", "origin"):
@@ -247,27 +263,61 @@ def load_map_yaml(path: str | Path) -> OccupancyGrid:
     origin = meta["origin"]
     if not (isinstance(origin, list) and len(origin) == 3):
         raise MapError(f"map.yaml: origin must be [x, y, yaw] (got {origin!r})")
-    if abs(float(origin[2])) > 1e-9:
+    origin = finite_sequence(origin, "map.yaml: origin", error=MapError)
+    if abs(origin[2]) > 1e-9:
         raise MapError(f"map.yaml: origin yaw must be 0 (got {origin[2]!r})")
-    try:
-        res = float(meta["resolution"])
-        negate = int(meta.get("negate", 0))
-        occ_t = float(meta.get("occupied_thresh", DEFAULT_OCCUPIED_THRESH))
-        free_t = float(meta.get("free_thresh", DEFAULT_FREE_THRESH))
-    except (TypeError, ValueError) as exc:
-        raise MapError(f"map.yaml: bad number in {str(path)!r}: {exc}") from exc
-    if not res > 0:
-        raise MapError(f"map.yaml: resolution must be > 0 (got {res})")
+    res = finite_float(meta["resolution"], "map.yaml: resolution", error=MapError)
+    occ_t = finite_float(
+        meta.get("occupied_thresh", DEFAULT_OCCUPIED_THRESH),
+        "map.yaml: occupied_thresh",
+        error=MapError,
+    )
+    free_t = finite_float(
+        meta.get("free_thresh", DEFAULT_FREE_THRESH), "map.yaml: free_thresh", error=MapError
+    )
+    negate = meta.get("negate", 0)
+    if negate not in (0, 1):
+        raise MapError(f"map.yaml: negate must be 0 or 1 (got {negate!r})")
+    if not res >= MIN_RESOLUTION_M:
+        raise MapError(f"map.yaml: resolution must be >= {MIN_RESOLUTION_M} (got {res})")
     if not 0 <= free_t < occ_t <= 1:
         raise MapError(
             f"map.yaml: need 0 <= free_thresh < occupied_thresh <= 1 (got {free_t}, {occ_t})"
         )
-    with Image.open(image_path) as img:
-        pixels = np.asarray(img.convert("L"), dtype=float)
+    pixels = _read_map_image(image_path)
     p = pixels / 255.0 if negate else (255.0 - pixels) / 255.0
     occupied = np.flipud(p > occ_t)
     unknown = np.flipud((p >= free_t) & (p <= occ_t))
     return OccupancyGrid(occupied, res, (float(origin[0]), float(origin[1])), unknown)
+
+
+def _read_map_image(image_path: Path) -> np.ndarray:
+    """The map image as grey levels, refused (:class:`MapError`) if it is not an image, is
+    truncated or empty, or would be over the cell budget (checked from the header, before
+    the pixels are decoded: a decompression bomb is never expanded)."""
+    name = str(image_path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(image_path) as img:
+                cols, rows = img.size
+                check_grid_cells((rows, cols), f"map image {name!r}", error=MapError)
+                pixels = np.asarray(img.convert("L"), dtype=float)
+    except MapError:
+        raise
+    except (
+        OSError,
+        SyntaxError,
+        ValueError,
+        Image.DecompressionBombError,
+        Image.DecompressionBombWarning,
+    ) as exc:
+        # PIL: UnidentifiedImageError (an OSError) for what is no image, OSError for a
+        # truncated one, SyntaxError for a broken header.
+        raise MapError(f"map image {name!r} cannot be read: {exc}") from None
+    if pixels.ndim != 2 or pixels.size == 0:
+        raise MapError(f"map image {name!r} is empty")
+    return pixels
 
 
 def save_map_yaml(grid: OccupancyGrid, path: str | Path) -> Path:

@@ -43,6 +43,8 @@ MAX_ITERATIONS = 300
 #: step lengths adapt, so one small change is not yet a minimum).
 ENERGY_RTOL = 1e-5
 ENERGY_PATIENCE = 10
+#: Relocation stops when this many of the most crowded skids in a row gain nothing by it.
+MAX_FAILED_RELOCATIONS = 3
 #: Boundary discretization: points per skid width (and at most this spacing, metres).
 BOUNDARY_POINTS_PER_WIDTH = 4
 MAX_BOUNDARY_SPACING_M = 0.25
@@ -156,69 +158,25 @@ def _resolve(region: Region, half: np.ndarray, old: np.ndarray, prop: np.ndarray
         moved[idx[revert]] = False
 
 
-def spread(
+def _descend(
     region: Region,
-    skids: Skids,
-    centres: np.ndarray,
+    half: np.ndarray,
+    bpts: np.ndarray,
+    c: np.ndarray,
+    params,
     *,
-    variant: str = "auto",
-    max_iterations: int = MAX_ITERATIONS,
-    energy_rtol: float = ENERGY_RTOL,
-    threshold_m: float | None = None,
-) -> tuple[np.ndarray, dict]:
-    """Spread a valid layout by the potential field.
-
-    Each iteration, every goal proposes a move of its own step length along its force; a
-    move is kept if it lowers that goal's energy (others held where they were), keeps the
-    footprint in the free region with the margin and keeps the margin to the other goals
-    (after their moves). Kept moves lengthen that goal's step, rejected ones halve it.
-
-    Parameters
-    ----------
-    region, skids
-        Layout-frame region and the footprints.
-    centres
-        ``(N, 2)`` valid starting centres (the stacking layout).
-    variant
-        ``"centroid"``, ``"vertex"``, or ``"auto"``: centroid for one footprint size,
-        vertex for mixed sizes.
-    max_iterations
-        Iteration cap.
-    energy_rtol
-        Stop when the total energy changes by less than this fraction in an iteration.
-    threshold_m
-        Boundary points farther than this do not act (eq. 2). Default: the largest skid
-        pitch (length + margin).
-
-    Returns
-    -------
-    centres, info
-        Final centres and a dict with ``variant``, ``iterations``, ``energy_initial``,
-        ``energy_final``, ``converged``, ``notices``.
-    """
-    if variant == "auto":
-        variant = "centroid" if skids.uniform else "vertex"
-    if variant not in VARIANTS:
-        raise ValueError(f"potential variant must be one of {VARIANTS} or 'auto' (got {variant!r})")
-    half = skids.half
+    max_iterations: int,
+    energy_rtol: float,
+) -> tuple[np.ndarray, float, int, bool]:
+    """Gradient descent with per-goal adaptive steps (see the module docstring) from the
+    valid centres ``c``; returns the centres, the energy, the iterations and whether the
+    energy settled before the cap."""
     n = len(half)
-    c = np.asarray(centres, dtype=float).copy()
     width = 2.0 * float(half.min())
-    pitch = float(
-        np.sqrt(np.mean((2 * half[:, 0] + region.margin) * (2 * half[:, 1] + region.margin)))
-    )
-    spacing = min(width / BOUNDARY_POINTS_PER_WIDTH, MAX_BOUNDARY_SPACING_M)
-    bpts = boundary_points(region, spacing)
-    thr = float(threshold_m) if threshold_m is not None else float(2 * half.max() + region.margin)
-    params = dict(variant=variant, threshold_m=thr, boundary_weight=spacing / pitch)
-
     pair, bnd, force = local_terms(c, c, half, bpts, **params)
     energy = total_energy(pair, bnd)
-    e0 = energy
     steps = np.full(n, INITIAL_STEP_FRACTION * width)
     min_step = MIN_STEP_FRACTION * width
-    max_step = width
-    converged = False
     quiet = 0  # consecutive iterations with a small energy change
     it = 0
     while it < max_iterations:
@@ -226,8 +184,7 @@ def spread(
         norm = np.linalg.norm(force, axis=1)
         active = norm > 0
         if not active.any():
-            converged = True
-            break
+            return c, energy, it, True
         direction = force / np.where(norm > 0, norm, 1.0)[:, None]
         new, kept = c, np.zeros(n, dtype=bool)
         # The full move first; where it is blocked, its x or y part alone (footprints are
@@ -246,7 +203,7 @@ def spread(
             kept |= moved
         # A blocked goal keeps trying with a short step: as the others move away, its force
         # may turn to a direction it can move in.
-        steps = np.where(kept, np.minimum(steps * STEP_GROWTH, max_step), steps * 0.5)
+        steps = np.where(kept, np.minimum(steps * STEP_GROWTH, width), steps * 0.5)
         steps = np.maximum(steps, min_step)
         drop = 0.0
         if kept.any():
@@ -260,11 +217,134 @@ def spread(
                 steps = np.where(kept, steps * 0.25, steps)
         quiet = quiet + 1 if drop < energy_rtol * abs(energy) else 0
         if quiet >= ENERGY_PATIENCE:
-            converged = True
+            return c, energy, it, True
+    return c, energy, it, False
+
+
+def _largest_hole(region: Region, half: np.ndarray, c: np.ndarray, i: int) -> np.ndarray | None:
+    """The centre, on a grid of half the narrowest skid width, where skid ``i`` fits (in
+    the free region with the margin, the margin from every other skid) farthest from the
+    other skids' rectangles; ``None`` if it fits nowhere but where it is."""
+    step = float(half.min())
+    xmin, ymin, xmax, ymax = region.inner.bounds
+    xs = np.arange(xmin + half[i, 0], xmax - half[i, 0] + 1e-9, step)
+    ys = np.arange(ymin + half[i, 1], ymax - half[i, 1] + 1e-9, step)
+    if not len(xs) or not len(ys):
+        return None
+    cand = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    others = np.delete(np.arange(len(c)), i)
+    d = np.abs(cand[:, None, :] - c[None, others, :]) - (half[i] + half[others])[None]
+    gap = np.where(
+        np.maximum(d[..., 0], d[..., 1]) < 0,
+        -np.inf,
+        np.hypot(np.maximum(d[..., 0], 0), np.maximum(d[..., 1], 0)),
+    ).min(axis=1, initial=np.inf)
+    ok = gap >= region.margin - _GAP_TOL_M
+    ok[ok] = region.inside(cand[ok], np.broadcast_to(half[i], (int(ok.sum()), 2)))
+    if not ok.any():
+        return None
+    return cand[np.flatnonzero(ok)[np.argmax(gap[ok])]]
+
+
+def spread(
+    region: Region,
+    skids: Skids,
+    centres: np.ndarray,
+    *,
+    variant: str = "auto",
+    max_iterations: int = MAX_ITERATIONS,
+    energy_rtol: float = ENERGY_RTOL,
+    threshold_m: float | None = None,
+    relocations: int | None = None,
+) -> tuple[np.ndarray, dict]:
+    """Spread a valid layout by the potential field.
+
+    Each iteration, every goal proposes a move of its own step length along its force; a
+    move is kept if it lowers that goal's energy (others held where they were), keeps the
+    footprint in the free region with the margin and keeps the margin to the other goals
+    (after their moves). Kept moves lengthen that goal's step, rejected ones halve it.
+
+    The descent stops in the nearest minimum of eq. 1, and from the stacking layout that is
+    a packed one: stacking fills columns from one side, and a skid in a full column is held
+    by its neighbours' equal and opposite pushes. So, after the descent, the goal with the
+    highest energy is moved to the largest free hole (the grid point where it fits farthest
+    from the others) and the descent runs again; the move is kept if the total energy
+    drops (a basin-hopping step, Wales and Doye 1997), and this repeats up to
+    ``relocations`` times or until a move does not help. Every kept layout is valid, and
+    the energy never rises.
+
+    Parameters
+    ----------
+    region, skids
+        Layout-frame region and the footprints.
+    centres
+        ``(N, 2)`` valid starting centres (the stacking layout).
+    variant
+        ``"centroid"``, ``"vertex"``, or ``"auto"``: centroid for one footprint size,
+        vertex for mixed sizes.
+    max_iterations
+        Iteration cap of each descent.
+    energy_rtol
+        Stop when the total energy changes by less than this fraction in an iteration.
+    threshold_m
+        Boundary points farther than this do not act (eq. 2). Default: the largest skid
+        pitch (length + margin).
+    relocations
+        Largest number of relocation moves (default: the number of skids; 0 gives the
+        plain descent of eqs. 1-4).
+
+    Returns
+    -------
+    centres, info
+        Final centres and a dict with ``variant``, ``iterations``, ``relocations``,
+        ``energy_initial``, ``energy_final``, ``converged``, ``notices``.
+    """
+    if variant == "auto":
+        variant = "centroid" if skids.uniform else "vertex"
+    if variant not in VARIANTS:
+        raise ValueError(f"potential variant must be one of {VARIANTS} or 'auto' (got {variant!r})")
+    half = skids.half
+    n = len(half)
+    c = np.asarray(centres, dtype=float).copy()
+    width = 2.0 * float(half.min())
+    pitch = float(
+        np.sqrt(np.mean((2 * half[:, 0] + region.margin) * (2 * half[:, 1] + region.margin)))
+    )
+    spacing = min(width / BOUNDARY_POINTS_PER_WIDTH, MAX_BOUNDARY_SPACING_M)
+    bpts = boundary_points(region, spacing)
+    thr = float(threshold_m) if threshold_m is not None else float(2 * half.max() + region.margin)
+    params = dict(variant=variant, threshold_m=thr, boundary_weight=spacing / pitch)
+    opts = dict(max_iterations=max_iterations, energy_rtol=energy_rtol)
+
+    e0 = total_energy(*local_terms(c, c, half, bpts, **params)[:2])
+    c, energy, iterations, converged = _descend(region, half, bpts, c, params, **opts)
+    moves = 0
+    budget = n if relocations is None else int(relocations)
+    tried: set[int] = set()
+    while moves < budget and n > 1:
+        pair, bnd, _ = local_terms(c, c, half, bpts, **params)
+        order = [int(k) for k in np.argsort(-(pair + bnd), kind="stable") if int(k) not in tried]
+        if not order:
             break
+        i = order[0]
+        hole = _largest_hole(region, half, c, i)
+        tried.add(i)
+        if hole is None:
+            continue
+        trial = c.copy()
+        trial[i] = hole
+        t_c, t_e, t_it, t_conv = _descend(region, half, bpts, trial, params, **opts)
+        iterations += t_it
+        if t_e < energy * (1.0 - energy_rtol):
+            c, energy, converged = t_c, t_e, t_conv
+            moves += 1
+            tried.clear()
+        elif len(tried) >= min(n, MAX_FAILED_RELOCATIONS):
+            break  # the most crowded skids gain nothing by moving: a settled layout
     info = {
         "variant": variant,
-        "iterations": it,
+        "iterations": iterations,
+        "relocations": moves,
         "energy_initial": e0,
         "energy_final": energy,
         "converged": converged,

@@ -432,6 +432,12 @@ def scan(
 
     ranges = ranges.reshape(n, b)
     ranges[ranges > spec.max_range_m] = np.inf
+    return _add_noise(spec, ranges, rng)
+
+
+def _add_noise(spec: LidarSpec, ranges: np.ndarray, rng: np.random.Generator | None) -> np.ndarray:
+    """The spec's range noise (on returns only, clipped to ``[0, max_range_m]``) and dropouts
+    (``nan``) applied to exact ranges ``(N, B)``, which may be modified in place."""
     if spec.range_noise_std_m > 0 or spec.dropout_prob > 0:
         if rng is None:
             raise ValueError("scan: rng is required when the lidar has noise or dropouts")

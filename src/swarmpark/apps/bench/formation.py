@@ -27,8 +27,8 @@ def _row(case: str, plan, stats: dict, target_ms: float) -> dict:
 
 @register("formation.table1", "six robots, Table 1, M = 15: plan_velocities", target="< 1 s")
 def bench_table1(quick: bool) -> list[dict]:
+    from swarmpark.control.formation import METHODS, plan_velocities
     from swarmpark.control.formation.paper import paper_problem
-    from swarmpark.control.formation.planner import METHODS, plan_velocities
 
     problem = paper_problem()
     rows = []
@@ -45,8 +45,8 @@ def bench_table1(quick: bool) -> list[dict]:
     target="< 30 s at 20 robots, M = 60",
 )
 def bench_large(quick: bool) -> list[dict]:
+    from swarmpark.control.formation import plan_velocities
     from swarmpark.control.formation.paper import grid_problem
-    from swarmpark.control.formation.planner import plan_velocities
 
     n, m = (10, 30) if quick else (20, 60)
     problem = grid_problem(n, m)

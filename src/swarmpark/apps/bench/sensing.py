@@ -104,8 +104,8 @@ def bench_lidar(quick: bool) -> list[dict]:
     target="< 20 ms for 1000 particles x 100 beams",
 )
 def bench_pf(quick: bool) -> list[dict]:
+    from swarmpark.sense.amcl import FilterConfig, LikelihoodField, ParticleFilter
     from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
-    from swarmpark.sense.localize import FilterConfig, LikelihoodField, ParticleFilter
 
     grid = _hangar()
     spec = LidarSpec(range_noise_std_m=0.01)
@@ -189,8 +189,8 @@ def bench_pf(quick: bool) -> list[dict]:
 )
 def bench_mapping(quick: bool) -> list[dict]:
     from swarmpark.sense.lidar import LidarSpec, prepare_grid, scan
-    from swarmpark.sense.localize import OdometryDrift
     from swarmpark.sense.mapping import GridMapper
+    from swarmpark.sim.odometry import OdometryDrift
 
     grid = _hangar()
     field = prepare_grid(grid)

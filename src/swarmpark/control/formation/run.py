@@ -1,6 +1,6 @@
 """Executing a formation plan on skids: plan once, track the reference, yield to obstacles.
 
-Builds a :class:`~swarmpark.control.formation.planner.FormationProblem` from the skids' poses and a
+Builds a :class:`~swarmpark.control.formation.problem.FormationProblem` from the skids' poses and a
 formation command, solves it once (IPOPT, deterministic), and each tick turns the reference
 (with the online stop-and-wait / reverse modification of Sect. II.D applied when a person
 comes near the group) into ``(v, omega)`` by Kanayama's tracking law. It records what the
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarmpark.control.formation.planner import (
+from swarmpark.control.formation import (
     FormationProblem,
     OnlineAdjuster,
     TrackingGains,

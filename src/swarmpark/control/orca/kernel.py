@@ -1115,6 +1115,10 @@ def orca_step(
 ) -> OrcaResult:
     """New velocities for all robots from one snapshot (no dependence on robot order).
 
+    Above mccabe complexity 15 on purpose: its branches are the optional constraint families
+    (axes, static obstacles, people, neighbours, safety filter) assembled in one vectorized pass
+    over shared arrays, the hot path of every tick, which helpers would only split apart.
+
     Parameters
     ----------
     positions

@@ -1,0 +1,115 @@
+"""Input limits and validators shared by every edge (scenario and map loaders, CLI, API).
+
+One definition of "a usable number", "a grid small enough to allocate" and "a polygon small
+enough to process", so that a file, a command-line argument and a request body are refused
+for the same reason with the same words: the field, the value, and the limit.
+
+>>> finite_float(2.5, "map.resolution_m")
+2.5
+>>> finite_float(float("nan"), "goto.pose[0]")
+Traceback (most recent call last):
+...
+ValueError: goto.pose[0] must be a finite number (got nan)
+>>> check_grid_cells((10_000, 10_000), "map")
+Traceback (most recent call last):
+...
+ValueError: map: a grid of 10000 x 10000 cells is over the budget of 16000000 cells (use a coarser resolution or a smaller map)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+__all__ = [
+    "MAX_GRID_CELLS",
+    "MAX_POLYGON_VERTICES",
+    "MAX_COORDINATE_M",
+    "MIN_RESOLUTION_M",
+    "MAX_ID_LENGTH",
+    "finite_float",
+    "finite_sequence",
+    "check_grid_cells",
+    "check_vertices",
+]
+
+#: Grids (maps, costmaps) larger than this are refused before anything is allocated: a
+#: 200 m x 200 m deck at 5 cm. Each planning field over it is 128 MB of float64.
+MAX_GRID_CELLS = 16_000_000
+#: A boundary, wall or obstacle polygon may have at most this many vertices (an operator
+#: draws tens; a CAD export of a hangar has hundreds).
+MAX_POLYGON_VERTICES = 2_000
+#: Coordinates beyond this (10 km) are not a site on a ship or in a hangar.
+MAX_COORDINATE_M = 10_000.0
+#: Cells finer than a millimetre are a typo, not a map.
+MIN_RESOLUTION_M = 1e-3
+#: Robot and person ids longer than this are refused (they go into every frame and log line).
+MAX_ID_LENGTH = 64
+
+
+def _show(value: object, limit: int = 40) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def finite_float(
+    value: object,
+    field: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    error: type[ValueError] = ValueError,
+) -> float:
+    """``value`` as a finite float within ``[lo, hi]``; ``error(message)`` naming ``field``
+    and the value otherwise (NaN, infinities, strings such as ``'NaN'``, booleans)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise error(f"{field} must be a number (got {_show(value)})")
+    x = float(value)
+    if not math.isfinite(x):
+        raise error(f"{field} must be a finite number (got {_show(value)})")
+    if lo is not None and x < lo:
+        raise error(f"{field} must be >= {lo} (got {_show(value)})")
+    if hi is not None and x > hi:
+        raise error(f"{field} must be <= {hi} (got {_show(value)})")
+    return x
+
+
+def finite_sequence(
+    values: object,
+    field: str,
+    *,
+    length: int | None = None,
+    bound: float = MAX_COORDINATE_M,
+    error: type[ValueError] = ValueError,
+) -> list[float]:
+    """A list of finite floats, each within ``[-bound, bound]`` (``length`` of them when
+    given)."""
+    if not isinstance(values, Sequence) or isinstance(values, str | bytes):
+        raise error(f"{field} must be a list of numbers (got {_show(values)})")
+    if length is not None and len(values) != length:
+        raise error(f"{field} must have {length} numbers (got {_show(values)})")
+    return [
+        finite_float(v, f"{field}[{k}]", lo=-bound, hi=bound, error=error)
+        for k, v in enumerate(values)
+    ]
+
+
+def check_grid_cells(
+    shape: tuple[int, int], field: str, *, error: type[ValueError] = ValueError
+) -> None:
+    """Refuse a grid of ``shape`` (rows, columns) that is empty or over :data:`MAX_GRID_CELLS`,
+    before it is allocated."""
+    rows, cols = (int(s) for s in shape)
+    if rows <= 0 or cols <= 0:
+        raise error(f"{field}: a grid of {rows} x {cols} cells is empty")
+    if rows * cols > MAX_GRID_CELLS:
+        raise error(
+            f"{field}: a grid of {rows} x {cols} cells is over the budget of {MAX_GRID_CELLS} "
+            "cells (use a coarser resolution or a smaller map)"
+        )
+
+
+def check_vertices(n: int, field: str, *, error: type[ValueError] = ValueError) -> None:
+    """Refuse a polygon with more than :data:`MAX_POLYGON_VERTICES` vertices."""
+    if n > MAX_POLYGON_VERTICES:
+        raise error(f"{field} has {n} vertices, more than the limit of {MAX_POLYGON_VERTICES}")
