@@ -116,7 +116,7 @@ class SimLink:
         self.odometry = None
         if self.sensing:
             from swarmpark.sense.lidar import LidarSpec, prepare_grid
-            from swarmpark.sense.localize import OdometryDrift
+            from swarmpark.sim.odometry import OdometryDrift
 
             self.lidar_spec = LidarSpec(
                 num_beams=cfg.lidar_beams,

@@ -55,9 +55,9 @@ class OnboardSensing:
     """
 
     def __init__(self, world: World, info: FleetInfo, inbox: Inbox, base_grid) -> None:
+        from swarmpark.sense.amcl import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
         from swarmpark.sense.costmap import LocalCostmap
         from swarmpark.sense.lidar import LidarSpec
-        from swarmpark.sense.localize import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
 
         cfg = world.scenario.sensing
         self.n = info.n
