@@ -310,3 +310,29 @@ def test_noise_fault_perturbs_reported_poses_only():
 def test_bad_faults_are_refused_naming_the_field(fault, message):
     with pytest.raises(ScenarioError, match=message):
         _faulty([fault])
+
+
+def test_amcl_skips_a_silent_robot_and_catches_up_when_it_reports_again():
+    """Onboard localization runs per robot on what arrives: a robot whose messages are dropped
+    keeps its estimate, then its filter takes the whole odometry increment at once."""
+    world = make_world(
+        robots=[{"id": "a", "pose": [1.5, 1.5, 0.0]}, {"id": "b", "pose": [8.0, 4.5, 180.0]}],
+        sensing={"localization": "amcl", "lidar_beams": 120},
+        faults=[{"robot": "a", "from_s": 1.0, "to_s": 2.0, "drop": True}],
+        commands=[
+            {"goto": {"robot": "a", "pose": [6.0, 1.5, 0.0]}},
+            {"goto": {"robot": "b", "pose": [4.0, 4.5, 180.0]}},
+        ],
+    )
+    sup = Supervisor(world)
+    est = {}
+    while sup.t < 2.5 - 1e-9:
+        sup.tick()
+        est[round(sup.t, 2)] = sup.estimates.copy()
+    frozen = [est[t][0] for t in est if 1.0 <= t < 2.0 - 1e-9]
+    assert len(frozen) >= 19 and all(np.array_equal(frozen[0], e) for e in frozen)
+    assert est[1.95][1][0] < est[1.05][1][0] - 0.1  # b kept moving and localizing
+    # Back after the window: a's estimate jumps forward with the odometry it missed, and is
+    # where a really is.
+    assert est[2.0][0][0] - frozen[-1][0] > 0.1
+    assert np.hypot(*(sup.estimates[0, :2] - sup.sim.poses[0, :2])) < 0.1

@@ -65,12 +65,22 @@ class FleetInfo:
             raise ValueError(f"link: duplicate robot id in {list(self.ids)}")
         if len(self.footprints) != n:
             raise ValueError(f"link: {len(self.footprints)} footprints for {n} robots")
-        for name in ("max_speed_mps", "max_yaw_rate_radps", "max_accel_mps2"):
+        for name in (
+            "max_speed_mps",
+            "max_yaw_rate_radps",
+            "max_accel_mps2",
+            "max_yaw_accel_radps2",
+        ):
             a = np.asarray(getattr(self, name), float)
             if a.shape != (n,) or not np.all(np.isfinite(a) & (a > 0)):
                 raise ValueError(f"link: {name} must be {n} positive numbers (got {a.tolist()})")
         if not (np.isfinite(self.dt_s) and self.dt_s > 0):
             raise ValueError(f"link: dt_s must be > 0 (got {self.dt_s})")
+        start = np.asarray(self.start_poses, float)
+        if start.shape != (n, 3) or not np.all(np.isfinite(start)):
+            raise ValueError(
+                f"link: start_poses must be {n} finite (x, y, yaw) (got {start.shape})"
+            )
 
     @property
     def n(self) -> int:

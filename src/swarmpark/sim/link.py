@@ -95,6 +95,7 @@ class SimLink:
         self.sim = sim if sim is not None else Simulator(world)
         sim = self.sim
         self.ids = tuple(world.ids)
+        self._index = {rid: i for i, rid in enumerate(self.ids)}
         cfg = world.scenario.sensing
         self.sensing = cfg.localization == "amcl"
         self.faults = LinkFaults.from_world(world)
@@ -158,9 +159,8 @@ class SimLink:
         return out
 
     def send(self, commands: list[VelocityCommand]) -> None:
-        index = {rid: i for i, rid in enumerate(self.ids)}
         for c in commands:
-            i = index.get(c.robot)
+            i = self._index.get(c.robot)
             if i is None:
                 raise ValueError(f"link.send: unknown robot {c.robot!r}")
             if self.faults:
@@ -172,9 +172,11 @@ class SimLink:
                 self._cmd_t[i] = c.stamp
 
     def stop(self, robots: list[str]) -> None:
-        index = {rid: i for i, rid in enumerate(self.ids)}
         for rid in robots:
-            self._hold[index[rid]] = True
+            i = self._index.get(rid)
+            if i is None:
+                raise ValueError(f"link.stop: unknown robot {rid!r}")
+            self._hold[i] = True
 
     def spin(self) -> StepResult:
         """One simulator step with the commands in force, then the robots report."""
@@ -238,7 +240,7 @@ class SimLink:
         """Queue a robot's message for delivery, through the faults of its link."""
         deliver = m.stamp
         if self.faults and not isinstance(m, TrackedPeople):
-            i = self.ids.index(m.robot)
+            i = self._index[m.robot]
             act = self.faults.active(i, m.stamp)
             if act.any():
                 if np.any(self.faults.drop[act]):
