@@ -187,6 +187,22 @@ def test_an_unknown_command_is_refused_with_the_known_ones():
     assert sup.outcomes[-1] is out
 
 
+def test_a_command_given_as_a_mapping_is_checked_against_its_schema():
+    sup = Supervisor(make_world())
+    out = sup.command("goto", {"robot": "a", "pose": [4.0, 3.0, 90.0]})
+    assert out.accepted, out.reason
+    assert sup.goals[0] == pytest.approx([4.0, 3.0, np.pi / 2])
+    bad = sup.command("goto", {"robot": "a"})
+    assert not bad.accepted and bad.reason.startswith("goto.pose: Field required")
+    assert sup.goals[0] == pytest.approx([4.0, 3.0, np.pi / 2])  # orders unchanged
+
+
+def test_a_link_to_other_robots_is_refused():
+    world = make_world()
+    with pytest.raises(ValueError, match=r"link: robots \['zz'\] differ from the scenario's"):
+        Supervisor(world, link=FakeLink(["zz"], [[1.0, 1.0, 0.0]]))
+
+
 def test_the_registry_runs_every_scenario_command():
     assert COMMANDS.names()[:6] == ("park", "goto", "formation", "stop", "estop", "resume")
     sup = Supervisor(make_world())

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 from shapely.geometry import Point, Polygon
 from shapely.ops import nearest_points, unary_union
 
@@ -93,6 +94,15 @@ class CommandsMixin:
         spec = COMMANDS.get(name)
         if spec is None:
             return self._refuse(str(name), COMMANDS.unknown(name))
+        if isinstance(payload, dict) and spec.request is not None:
+            # A plain mapping (a message from a topic, a script) is checked against the
+            # command's schema first, as the API checks its bodies.
+            try:
+                payload = spec.request.model_validate(payload)
+            except ValidationError as exc:
+                err = exc.errors()[0]
+                where = ".".join(str(x) for x in err["loc"])
+                return self._refuse(name, f"{name}.{where}: {err['msg']}")
         return spec.handler(self, payload)
 
     def execute(self, cmd: CommandSpec) -> Outcome:
