@@ -236,6 +236,45 @@ def test_rectangle_boundary_with_another_method_and_heading(page, server):
         assert pg.is_disabled("#park-confirm")
 
 
+def options(pg, sel: str) -> list[dict]:
+    return pg.evaluate(
+        f"[...document.querySelectorAll('{sel} option')]"
+        ".map(o => ({name: o.value, description: o.title}))"
+    )
+
+
+def test_park_choices_and_limits_are_read_from_the_api(browser, server):
+    """The method and assignment selects list what GET /api/meta lists (a method registered
+    on the server shows up without touching the page), and the inputs take its limits."""
+    from swarmpark.layout import LAYOUT_METHODS
+    from swarmpark.layout.methods import LayoutMethod, Stacking
+
+    class Rows(LayoutMethod):  # registered by subclassing, as a plugin would be
+        name = "test-rows"
+        description = "stacking by rows (registered by a test)"
+        solve = Stacking.solve
+        fill = Stacking.fill
+
+    try:
+        meta = server.call("GET", "/api/meta")
+        pg = browser.new_page(viewport={"width": 1400, "height": 850})
+        pg.goto(server.url + "/")
+        pg.wait_for_function("document.querySelectorAll('#park-method option').length > 0")
+        assert options(pg, "#park-method") == meta["layout_methods"]
+        assert [m["name"] for m in meta["layout_methods"]][-1] == "test-rows"
+        assert options(pg, "#park-assign") == meta["assignment_costs"]
+        assert pg.input_value("#park-method") == meta["defaults"]["method"] == "stacking"
+        assert pg.input_value("#park-assign") == meta["defaults"]["assignment"]
+        margin = meta["limits"]["margin_m"]
+        assert float(pg.get_attribute("#park-margin", "min")) == margin["min"] == 0.0
+        assert float(pg.input_value("#park-margin")) == margin["default"]
+        pg.select_option("#park-method", "test-rows")
+        assert pg.input_value("#park-method") == "test-rows"
+        pg.close()
+    finally:
+        LAYOUT_METHODS.remove("test-rows")
+
+
 def test_refused_preview_shows_the_reason_and_confirm_stays_off(page, server):
     pg = page
     box_select_all(pg)

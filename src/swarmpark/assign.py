@@ -3,20 +3,24 @@
 Costs: ``sequential`` (goal i to robot i, the 2015 behaviour), ``euclidean``, ``formation``
 (the robots' centroid shifted onto the goals' centroid, then distances, so the group keeps its
 shape and nobody crosses the others' lanes), ``path`` (shortest free-space path lengths, given
-by the caller as a matrix). Goals only go to robots whose footprint fits them. Re-assignment
-every tick uses hysteresis so assignments do not chatter.
+by the caller as a matrix). The costs are registered in :data:`ASSIGNMENT_COSTS` (the
+scenario schema, the API and the UI read the names from it). Goals only go to robots whose
+footprint fits them. Re-assignment every tick uses hysteresis so assignments do not chatter.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_bipartite_matching
 
+from swarmpark.core.registry import Registry
+
 __all__ = [
+    "ASSIGNMENT_COSTS",
     "COSTS",
     "cost_matrix",
     "assign",
@@ -24,8 +28,6 @@ __all__ = [
     "bottleneck_assignment",
     "AssignmentError",
 ]
-
-COSTS = ("sequential", "euclidean", "formation", "path")
 
 #: Cost that marks a robot/goal pair as impossible (the footprint does not fit the goal).
 INFEASIBLE = 1e9
@@ -36,6 +38,50 @@ HYSTERESIS_ABS_M = 0.5
 
 class AssignmentError(ValueError):
     """No assignment exists (more robots than goals, or footprints that fit no goal)."""
+
+
+#: ``cost(robot_xy (R, 2), goal_xy (G, 2), path_lengths (R, G) or None) -> (R, G)``
+CostFunction = Callable[[np.ndarray, np.ndarray, "np.ndarray | None"], np.ndarray]
+#: The assignment costs by name, in the order they were registered.
+ASSIGNMENT_COSTS: Registry[CostFunction] = Registry("assignment cost", "park.assignment")
+
+
+@ASSIGNMENT_COSTS.register("sequential", "goal i to robot i (the 2015 behaviour)")
+def _sequential(robot_xy, goal_xy, path_lengths):
+    c = np.full((len(robot_xy), len(goal_xy)), INFEASIBLE / 2)
+    k = min(len(robot_xy), len(goal_xy))
+    c[np.arange(k), np.arange(k)] = 0.0
+    return c
+
+
+@ASSIGNMENT_COSTS.register("euclidean", "straight-line distance to the goal")
+def _euclidean(robot_xy, goal_xy, path_lengths):
+    return np.linalg.norm(robot_xy[:, None] - goal_xy[None], axis=-1)
+
+
+@ASSIGNMENT_COSTS.register(
+    "formation", "the group keeps its shape: distances after moving its centroid onto the goals'"
+)
+def _formation(robot_xy, goal_xy, path_lengths):
+    shifted = robot_xy - robot_xy.mean(axis=0) + goal_xy.mean(axis=0)
+    # Distances of the shifted formation, plus a small share of the true distance to break
+    # ties between mirror-image matchings.
+    return np.linalg.norm(shifted[:, None] - goal_xy[None], axis=-1) + 1e-2 * np.linalg.norm(
+        robot_xy[:, None] - goal_xy[None], axis=-1
+    )
+
+
+@ASSIGNMENT_COSTS.register("path", "length of the shortest free path to the goal (path length)")
+def _path(robot_xy, goal_xy, path_lengths):
+    if path_lengths is None:
+        raise ValueError("cost 'path' needs path_lengths")
+    c = np.asarray(path_lengths, float).copy()
+    c[~np.isfinite(c)] = INFEASIBLE
+    return c
+
+
+#: Names of the registered costs at import (kept for callers of the first release).
+COSTS = ASSIGNMENT_COSTS.names()
 
 
 def cost_matrix(
@@ -57,26 +103,7 @@ def cost_matrix(
     """
     robot_xy = np.asarray(robot_xy, float).reshape(-1, 2)
     goal_xy = np.asarray(goal_xy, float).reshape(-1, 2)
-    if cost == "sequential":
-        c = np.full((len(robot_xy), len(goal_xy)), INFEASIBLE / 2)
-        k = min(len(robot_xy), len(goal_xy))
-        c[np.arange(k), np.arange(k)] = 0.0
-    elif cost == "euclidean":
-        c = np.linalg.norm(robot_xy[:, None] - goal_xy[None], axis=-1)
-    elif cost == "formation":
-        shifted = robot_xy - robot_xy.mean(axis=0) + goal_xy.mean(axis=0)
-        # Distances of the shifted formation, plus a small share of the true distance to break
-        # ties between mirror-image matchings.
-        c = np.linalg.norm(shifted[:, None] - goal_xy[None], axis=-1) + 1e-2 * np.linalg.norm(
-            robot_xy[:, None] - goal_xy[None], axis=-1
-        )
-    elif cost == "path":
-        if path_lengths is None:
-            raise ValueError("cost 'path' needs path_lengths")
-        c = np.asarray(path_lengths, float).copy()
-        c[~np.isfinite(c)] = INFEASIBLE
-    else:
-        raise ValueError(f"assignment: unknown cost {cost!r} (one of {', '.join(COSTS)})")
+    c = ASSIGNMENT_COSTS.get(cost)(robot_xy, goal_xy, path_lengths)
     if fits is not None:
         c = np.where(fits, c, INFEASIBLE)
     return c

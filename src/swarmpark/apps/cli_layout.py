@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmpark.core.limits import MAX_ROBOTS_PER_COMMAND
+
 __all__ = ["layout_command", "build_parser"]
 
 EXIT_OK, EXIT_BAD_INPUT = 0, 2
@@ -50,11 +52,13 @@ class _BadInput(Exception):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from swarmpark.layout import METHODS
+    from swarmpark.layout import LAYOUT_METHODS
 
     p = _Parser(
         prog="swarmpark layout",
-        description="Parking goals for skids inside a boundary (stacking, potential, convex).",
+        description="Parking goals for skids inside a boundary ("
+        + ", ".join(LAYOUT_METHODS.names())
+        + ").",
     )
     p.add_argument("--boundary", required=True, metavar="JSON", help="'[[x, y], ...]' metres")
     p.add_argument("--count", type=int, metavar="N", help="number of skids (with --footprint)")
@@ -72,7 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="JSON",
         help="mixed sizes instead of --count/--footprint: '[[L, W], [L, W, pivot], ...]'",
     )
-    p.add_argument("--method", choices=METHODS, help="layout method (default stacking)")
+    p.add_argument(
+        "--method",
+        choices=LAYOUT_METHODS.names(),
+        help="layout method (default stacking): "
+        + "; ".join(f"{e.name}: {e.description}" for e in LAYOUT_METHODS.entries()),
+    )
     p.add_argument("--heading-deg", default="0", metavar="D|auto", help="skid heading (deg)")
     p.add_argument("--margin-m", type=float, default=0.3, metavar="M", help="safety margin")
     p.add_argument("--map", metavar="FILE", help="map_server YAML; occupied cells are obstacles")
@@ -80,9 +89,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--capacity", action="store_true", help="how many of the footprint fit")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument(
-        "--png", metavar="FILE", help="draw the layout (all three methods if --method is not set)"
+        "--png", metavar="FILE", help="draw the layout (every method if --method is not set)"
     )
     return p
+
+
+def _check_png_path(path: str) -> None:
+    """Refuse a drawing path whose folder does not exist or whose extension matplotlib
+    cannot write, before any work is done."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise _BadInput(f"--png: folder {str(target.parent)!r} does not exist")
+    ext = target.suffix.lower().lstrip(".")
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if ext not in formats:
+        raise _BadInput(
+            f"--png: cannot write {ext or 'a file without extension'!r} "
+            f"(use one of {', '.join(sorted(formats))}): {path!r}"
+        )
 
 
 def _json_arg(text: str, option: str):
@@ -125,6 +151,8 @@ def _footprints(args):
         raise _BadInput("--count: required with --footprint (or use --capacity)")
     if args.count < 1:
         raise _BadInput(f"--count: must be >= 1 (got {args.count})")
+    if args.count > MAX_ROBOTS_PER_COMMAND:
+        raise _BadInput(f"--count: at most {MAX_ROBOTS_PER_COMMAND} skids (got {args.count})")
     return [fp] * args.count
 
 
@@ -282,7 +310,6 @@ def _draw(path: str, panels, boundary, obstacles, footprints) -> Path:
         ax.tick_params(labelsize=7)
     fig.tight_layout()
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
@@ -292,12 +319,14 @@ def layout_command(argv: list[str]) -> int:
     """Run ``swarmpark layout`` with ``argv`` (without the word ``layout``); exit code."""
     from swarmpark.core.geometry import GeometryError
     from swarmpark.core.gridmap import MapError
-    from swarmpark.layout import METHODS, LayoutError
+    from swarmpark.layout import LAYOUT_METHODS, LayoutError
 
     args = build_parser().parse_args(argv)
     try:
         if not math.isfinite(args.margin_m):
             raise _BadInput(f"--margin-m: must be finite (got {args.margin_m})")
+        if args.png:
+            _check_png_path(args.png)
         boundary = _json_arg(args.boundary, "--boundary")
         footprints = _footprints(args)
         obstacles = _obstacles(args, boundary)
@@ -305,7 +334,7 @@ def layout_command(argv: list[str]) -> int:
         res, seconds = _run(args, footprints, method, boundary, obstacles)
         panels = []
         if args.png:
-            for m in [args.method] if args.method else list(METHODS):
+            for m in [args.method] if args.method else list(LAYOUT_METHODS.names()):
                 if m == method:
                     r, s, err = res, seconds, None
                 else:

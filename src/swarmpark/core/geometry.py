@@ -15,6 +15,13 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
+from swarmpark.core.limits import (
+    MAX_COORDINATE_M,
+    MAX_FOOTPRINT_M,
+    MIN_FOOTPRINT_M,
+    check_vertices,
+)
+
 __all__ = [
     "Footprint",
     "wrap_angle",
@@ -74,6 +81,12 @@ class Footprint:
         if not (self.length_m > 0 and self.width_m > 0):
             raise GeometryError(
                 f"footprint: length_m and width_m must be > 0 (got {self.length_m}, {self.width_m})"
+            )
+        small, big = MIN_FOOTPRINT_M, MAX_FOOTPRINT_M
+        if not (small <= self.length_m <= big and small <= self.width_m <= big):
+            raise GeometryError(
+                f"footprint: length_m and width_m must lie within {small}..{big} m "
+                f"(got {self.length_m}, {self.width_m})"
             )
         if self.pivot_from_rear_m is None:
             object.__setattr__(self, "pivot_from_rear_m", self.length_m / 2.0)
@@ -253,6 +266,12 @@ def as_simple_polygon(points, field: str) -> Polygon:
         raise GeometryError(f"{field}: a polygon needs at least 3 [x, y] points (got {points!r})")
     if not np.all(np.isfinite(pts)):
         raise GeometryError(f"{field}: coordinates must be finite (got {points!r})")
+    if np.abs(pts).max() > MAX_COORDINATE_M:
+        raise GeometryError(
+            f"{field}: coordinates must lie within +-{MAX_COORDINATE_M:g} m "
+            f"(got {float(np.abs(pts).max()):g})"
+        )
+    check_vertices(len(pts), field, error=GeometryError)
     poly = Polygon(pts)
     if not poly.is_valid or poly.area <= 0:
         reason = shapely.is_valid_reason(poly)

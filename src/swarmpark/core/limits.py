@@ -27,6 +27,9 @@ __all__ = [
     "MAX_COORDINATE_M",
     "MIN_RESOLUTION_M",
     "MAX_ID_LENGTH",
+    "MIN_FOOTPRINT_M",
+    "MAX_FOOTPRINT_M",
+    "MAX_ROBOTS_PER_COMMAND",
     "finite_float",
     "finite_sequence",
     "check_grid_cells",
@@ -43,6 +46,11 @@ MAX_POLYGON_VERTICES = 2_000
 MAX_COORDINATE_M = 10_000.0
 #: Cells finer than a millimetre are a typo, not a map.
 MIN_RESOLUTION_M = 1e-3
+#: A skid footprint side must lie in this range (a centimetre is a typo; 50 m is a ship).
+MIN_FOOTPRINT_M = 0.01
+MAX_FOOTPRINT_M = 50.0
+#: Skids in one command or one layout request.
+MAX_ROBOTS_PER_COMMAND = 5_000
 #: Robot and person ids longer than this are refused (they go into every frame and log line).
 MAX_ID_LENGTH = 64
 

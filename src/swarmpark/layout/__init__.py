@@ -1,6 +1,7 @@
 """Parking layout: goal poses for skids inside an operator-drawn boundary.
 
-Three methods, after Hing et al. (2015, 2018): ``"stacking"`` (2018 Algorithm 1, testing
+Three methods (registered in :data:`LAYOUT_METHODS`, see :mod:`swarmpark.layout.methods`),
+after Hing et al. (2015, 2018): ``"stacking"`` (2018 Algorithm 1, testing
 the whole footprint), ``"potential"`` (2018 eqs. 1-4, from the stacking result) and
 ``"convex"`` (2015 Sect. 3.1 floor planning with cvxpy, structured optimization). Every
 layout is validated (inside the free region with the margin, no two skids within the
@@ -13,6 +14,16 @@ margin) and comes with a deepest-first fill order from the opening.
 """
 
 from swarmpark.layout.api import METHODS, LayoutResult, candidate_headings, capacity, layout
+from swarmpark.layout.methods import LAYOUT_METHODS, LayoutMethod
 from swarmpark.layout.region import LayoutError
 
-__all__ = ["METHODS", "LayoutResult", "LayoutError", "layout", "capacity", "candidate_headings"]
+__all__ = [
+    "METHODS",
+    "LAYOUT_METHODS",
+    "LayoutMethod",
+    "LayoutResult",
+    "LayoutError",
+    "layout",
+    "capacity",
+    "candidate_headings",
+]

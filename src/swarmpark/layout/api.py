@@ -14,15 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmpark.core.geometry import Footprint, wrap_angle
-from swarmpark.layout import stacking
 from swarmpark.layout.egress import default_opening, egress_order
+from swarmpark.layout.methods import LAYOUT_METHODS, capacity_stack, get_method
 from swarmpark.layout.region import (
     LayoutError,
     Region,
     Skids,
     _as_boundary,
     centres_to_poses,
-    describe_skids,
     make_region,
     make_skids,
 )
@@ -30,7 +29,8 @@ from swarmpark.layout.validate import check_layout
 
 __all__ = ["METHODS", "LayoutResult", "layout", "capacity", "candidate_headings"]
 
-METHODS = ("stacking", "potential", "convex")
+#: Names of the registered layout methods (see :mod:`swarmpark.layout.methods`), at import.
+METHODS = LAYOUT_METHODS.names()
 #: At most this many headings are tried for ``heading="auto"`` (0, 90 deg and the
 #: directions of the longest boundary edges and their normals).
 MAX_AUTO_HEADINGS = 12
@@ -64,12 +64,6 @@ class LayoutResult:
     heading: float
     fill_order: tuple[int, ...]
     report: dict
-
-
-def _check_method(method: str) -> str:
-    if method not in METHODS:
-        raise LayoutError(f"park.method: must be one of {list(METHODS)} (got {method!r})")
-    return method
 
 
 def _parse_heading(heading) -> float | None:
@@ -112,65 +106,20 @@ def candidate_headings(boundary) -> list[float]:
     return out
 
 
-def _stack_best(region: Region, skids: Skids, count: int | None) -> stacking.StackResult:
-    """Stacking in the paper's column order, and in row order if that fits more."""
-    best = stacking.stack(region, skids, order="columns", count=count)
-    want = len(skids) if count is None else count
-    if best.fits < want:
-        alt = stacking.stack(region, skids, order="rows", count=count)
-        if alt.fits > best.fits:
-            best = alt
-    return best
-
-
 def _room(region: Region, skids: Skids) -> int:
     """Stacking capacity of the largest footprint: the score ``heading="auto"`` maximizes."""
     big = max(skids.footprints, key=lambda fp: (fp.length_m * fp.width_m, fp.length_m))
-    return _capacity_stack(region, big).fits
-
-
-def _capacity_stack(region: Region, footprint: Footprint) -> stacking.StackResult:
-    """Stacking until full with one footprint size."""
-    area = footprint.length_m * footprint.width_m
-    upper = int(region.free.area / area) + 1
-    return _stack_best(region, make_skids([footprint] * upper), None)
-
-
-def _not_enough(skids: Skids, fits: int, margin: float, method: str) -> LayoutError:
-    return LayoutError(
-        f"park.boundary: only {fits} of {len(skids)} skids ({describe_skids(skids)}, "
-        f"margin {margin:g} m) fit with method {method!r}",
-        fits=fits,
-    )
+    return capacity_stack(region, big).fits
 
 
 def _solve(region: Region, skids: Skids, method: str) -> tuple[np.ndarray, dict]:
     """Layout-frame centres ``(N, 2)`` and method details; raises LayoutError if they don't fit."""
-    n = len(skids)
-    if method == "stacking" or method == "potential":
-        st = _stack_best(region, skids, n)
-        if st.fits < n:
-            raise _not_enough(skids, st.fits, region.margin, method)
-        info: dict = {"scan_order": st.order, "iterations": 0, "notices": []}
-        if st.order != "columns":
-            info["notices"].append(
-                "stacking scanned by rows: the paper's column scan fits fewer skids here"
-            )
-        if method == "stacking":
-            return st.centres, info
-        from swarmpark.layout import potential
-
-        centres, pinfo = potential.spread(region, skids, st.centres)
-        pinfo["notices"] = info["notices"] + pinfo.get("notices", [])
-        pinfo["scan_order"] = st.order
-        return centres, pinfo
-    from swarmpark.layout import convex
-
-    return convex.solve(region, skids)
+    return get_method(method).solve(region, skids)
 
 
 def _finish_checked(boundary_world, region, skids, centres, method, info, opening):
-    """:func:`_finish`, falling back to stacking when a convex solution fails validation.
+    """:func:`_finish`, falling back to the method's ``fallback`` (convex: stacking) when its
+    solution fails validation.
 
     The convex program keeps its constraints only within solver tolerance, and on some
     non-convex boundaries (split into pieces) a footprint can end up outside by more than the
@@ -180,13 +129,14 @@ def _finish_checked(boundary_world, region, skids, centres, method, info, openin
     try:
         return _finish(boundary_world, region, skids, centres, method, info, opening)
     except LayoutError as exc:
-        if method != "convex" or exc.fits is not None:
+        other = get_method(method).fallback
+        if other is None or exc.fits is not None:
             raise
-        centres, fallback = _solve(region, skids, "stacking")
-        fallback["notices"] = [f"convex: {exc}; used the stacking layout instead"] + fallback.get(
+        centres, fallback = _solve(region, skids, other)
+        fallback["notices"] = [f"{method}: {exc}; used the {other} layout instead"] + fallback.get(
             "notices", []
         )
-        return _finish(boundary_world, region, skids, centres, "stacking", fallback, opening)
+        return _finish(boundary_world, region, skids, centres, other, fallback, opening)
 
 
 def _finish(
@@ -276,7 +226,8 @@ def layout(
         :func:`candidate_headings`) with the most room, measured by how many of the largest
         footprint fit by stacking (ties: first candidate, so 0 wins over 90 deg).
     method
-        ``"stacking"``, ``"potential"`` or ``"convex"``.
+        A name registered in :data:`~swarmpark.layout.methods.LAYOUT_METHODS`:
+        ``"stacking"``, ``"potential"`` or ``"convex"`` (or one registered later).
     margin_m
         Clearance between skids and from skids to the boundary, walls and obstacles.
     obstacles
@@ -305,7 +256,7 @@ def layout(
     >>> res.report["min_spacing_m"]
     0.25
     """
-    method = _check_method(method)
+    get_method(method)  # an unknown name is refused before any work
     h = _parse_heading(heading)
     skids = make_skids(footprints)
     if h is not None:
@@ -385,35 +336,25 @@ def capacity(
     which its structured problem is feasible (at most the stacking count).
     ``report["capacity"]`` holds the count. Parameters as in :func:`layout`.
     """
-    method = _check_method(method)
+    fill = get_method(method).fill
     if not isinstance(footprint, Footprint):
         raise LayoutError(f"park.footprint: expected a Footprint (got {footprint!r})")
     h = _parse_heading(heading)
     heads = [h] if h is not None else candidate_headings(boundary)
-    best: tuple[int, Region, stacking.StackResult] | None = None
+    best = None
     for a in heads:
         region = make_region(boundary, obstacles, a, margin_m)
-        st = _capacity_stack(region, footprint)
+        st = capacity_stack(region, footprint)
         if best is None or st.fits > best[0]:
             best = (st.fits, region, st)
     assert best is not None
     k, region, st = best
     if k == 0:
         return _empty(method, region, ["not even one skid fits"])
-    centres = st.centres[st.placed]
-    skids = make_skids([footprint] * k)
-    info: dict = {"scan_order": st.order, "iterations": 0, "notices": []}
-    if method == "potential":
-        from swarmpark.layout import potential
-
-        centres, info = potential.spread(region, skids, centres)
-    elif method == "convex":
-        from swarmpark.layout import convex
-
-        centres, info = convex.largest(region, footprint, k)
-        if len(centres) == 0:
-            return _empty(method, region, ["convex: not even one skid fits"])
-        skids = make_skids([footprint] * len(centres))
+    centres, info = fill(region, footprint, st)
+    if len(centres) == 0:
+        return _empty(method, region, [f"{method}: not even one skid fits"])
+    skids = make_skids([footprint] * len(centres))
     result = _finish_checked(boundary, region, skids, centres, method, info, opening)
     result.report["capacity"] = len(result.poses)
     return result

@@ -18,7 +18,7 @@ from fastapi.staticfiles import StaticFiles
 
 from swarmpark.server.engine import Session
 from swarmpark.server.frames import jsonable
-from swarmpark.server.routers import commands, sim, state
+from swarmpark.server.routers import commands, meta, sim, state
 
 __all__ = [
     "create_app",
@@ -157,6 +157,7 @@ def create_app(
     app.include_router(sim.router)
     app.include_router(commands.router)
     app.include_router(state.router)
+    app.include_router(meta.router)
 
     @app.get("/", include_in_schema=False)
     async def index():

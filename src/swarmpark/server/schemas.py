@@ -38,6 +38,12 @@ __all__ = [
     "SimStatus",
     "ScenarioList",
     "AuthStatus",
+    "Choice",
+    "Range",
+    "HeadingLimits",
+    "TeleopLimits",
+    "Limits",
+    "Meta",
     "MAX_SPEED_FACTOR",
     "MIN_SPEED_FACTOR",
 ]
@@ -118,3 +124,63 @@ class ScenarioList(BaseModel):
 class AuthStatus(BaseModel):
     token_required: bool
     control: bool
+
+
+# ----------------------------------------------------------------------------- GET /api/meta
+
+
+class Choice(BaseModel):
+    """One registered name (layout method, assignment cost, avoidance mode)."""
+
+    name: str
+    description: str
+
+
+class Range(BaseModel):
+    """Bounds of a number (``None``: unbounded on that side), its default and the step the
+    UI's spinner uses."""
+
+    min: float | None = None
+    max: float | None = None
+    default: float | None = None
+    step: float | None = None
+
+
+class HeadingLimits(Range):
+    """The parked heading in degrees; ``special`` lists the words accepted instead of a
+    number (``"auto"``: the heading with the most room)."""
+
+    special: list[str] = []
+
+
+class TeleopLimits(BaseModel):
+    """Teleoperation: the server keeps applying the last command for ``deadman_s`` wall
+    seconds after it arrived, so a client sends every ``send_period_s``. Speeds are clipped
+    to each robot's own limits (``GET /api/world``: ``max_speed_mps``,
+    ``max_yaw_rate_radps``)."""
+
+    deadman_s: float
+    send_period_s: float
+
+
+class Limits(BaseModel):
+    """What a request may ask for."""
+
+    margin_m: Range
+    heading_deg: HeadingLimits
+    robots_per_park: Range
+    sim_speed: Range
+    step_ticks: Range
+    teleop: TeleopLimits
+
+
+class Meta(BaseModel):
+    """The choices and limits of the operator API, read from the registries and schemas:
+    the UI builds its controls from this instead of copying them."""
+
+    layout_methods: list[Choice]
+    assignment_costs: list[Choice]
+    avoidance_modes: list[Choice]
+    #: The park request's default ``method`` and ``assignment``.
+    defaults: dict[str, Any]
+    limits: Limits

@@ -91,9 +91,9 @@ class CommandsMixin:
     def command(self, name: str, payload: Any = None) -> Outcome:
         """Carry out the operator command ``name`` (see :data:`~swarmpark.supervisor.registry.COMMANDS`)
         with its payload; a name nobody registered is refused with the known ones."""
+        if name not in COMMANDS:
+            return self._refuse(str(name), str(COMMANDS.error(name)))
         spec = COMMANDS.get(name)
-        if spec is None:
-            return self._refuse(str(name), COMMANDS.unknown(name))
         if isinstance(payload, dict) and spec.request is not None:
             # A plain mapping (a message from a topic, a script) is checked against the
             # command's schema first, as the API checks its bodies.

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from swarmpark.core.registry import Registry
 from swarmpark.world.scenario import COMMAND_KINDS, FormationCmd, GotoCmd, ParkCmd
 
 if TYPE_CHECKING:
@@ -29,7 +30,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CommandDef",
-    "CommandRegistry",
     "COMMANDS",
     "ParkRequest",
     "GotoRequest",
@@ -47,9 +47,9 @@ class _Strict(BaseModel):
 class ParkRequest(ParkCmd):
     """Park ``robots`` inside ``boundary`` (``[[x, y], ...]``, metres, at least 3 vertices).
 
-    ``heading_deg`` is the parked yaw in degrees (or ``"auto"``), ``method`` one of
-    ``stacking``, ``potential``, ``convex``; ``margin_m`` the clearance between skids and to
-    the boundary; ``assignment`` the robot-to-goal cost.
+    ``heading_deg`` is the parked yaw in degrees (or ``"auto"``), ``method`` a layout method
+    and ``assignment`` a robot-to-goal cost, both as listed by ``GET /api/meta`` (from their
+    registries); ``margin_m`` the clearance between skids and to the boundary.
     """
 
     @field_validator("robots")
@@ -134,36 +134,13 @@ class CommandDef:
     needs_token: bool = True
 
 
-class CommandRegistry:
-    """Commands by name, in registration order."""
-
-    def __init__(self) -> None:
-        self._defs: dict[str, CommandDef] = {}
-
-    def add(self, spec: CommandDef) -> CommandDef:
-        if spec.name in self._defs:
-            raise ValueError(f"command {spec.name!r} is registered twice")
-        self._defs[spec.name] = spec
-        return spec
-
-    def get(self, name: str) -> CommandDef | None:
-        return self._defs.get(name)
-
-    def names(self) -> tuple[str, ...]:
-        return tuple(self._defs)
-
-    def __iter__(self):
-        return iter(self._defs.values())
-
-    def __contains__(self, name: object) -> bool:
-        return name in self._defs
-
-    def unknown(self, name: str) -> str:
-        """The refusal for a command nobody registered."""
-        return f"unknown command {name!r}; known commands: {', '.join(self._defs)}"
+#: Every operator command by name (a :class:`~swarmpark.core.registry.Registry` of
+#: :class:`CommandDef`, in the order the API lists them).
+COMMANDS: Registry[CommandDef] = Registry("command", "command")
 
 
-COMMANDS = CommandRegistry()
+def _add(spec: CommandDef) -> None:
+    COMMANDS.add(spec.name, spec, spec.summary)
 
 
 def _names(payload: Any) -> Any:
@@ -171,7 +148,7 @@ def _names(payload: Any) -> Any:
     return payload.robots if isinstance(payload, RobotsRequest) else payload
 
 
-COMMANDS.add(
+_add(
     CommandDef(
         "park",
         lambda sup, p: sup.park(p),
@@ -182,7 +159,7 @@ COMMANDS.add(
         request=ParkRequest,
     )
 )
-COMMANDS.add(
+_add(
     CommandDef(
         "goto",
         lambda sup, p: sup.goto(p),
@@ -191,7 +168,7 @@ COMMANDS.add(
         request=GotoRequest,
     )
 )
-COMMANDS.add(
+_add(
     CommandDef(
         "formation",
         lambda sup, p: sup.formation(p),
@@ -202,7 +179,7 @@ COMMANDS.add(
         request=FormationRequest,
     )
 )
-COMMANDS.add(
+_add(
     CommandDef(
         "stop",
         lambda sup, p: sup.stop(_names(p)),
@@ -210,7 +187,7 @@ COMMANDS.add(
         request=RobotsRequest,
     )
 )
-COMMANDS.add(
+_add(
     CommandDef(
         "estop",
         lambda sup, p: sup.estop(),
@@ -220,7 +197,7 @@ COMMANDS.add(
         needs_token=False,
     )
 )
-COMMANDS.add(
+_add(
     CommandDef(
         "resume",
         lambda sup, p: sup.resume(_names(p)),
@@ -228,7 +205,7 @@ COMMANDS.add(
         request=RobotsRequest,
     )
 )
-COMMANDS.add(
+_add(
     CommandDef(
         "teleop",
         lambda sup, p: sup.set_teleop(p.robot, p.v_mps, p.omega_radps),
@@ -238,7 +215,7 @@ COMMANDS.add(
         route=False,  # the server keeps a teleop alive between requests (routers/commands.py)
     )
 )
-COMMANDS.add(
+_add(
     CommandDef(
         "release",
         lambda sup, p: sup.release(p.robot),
@@ -250,5 +227,5 @@ COMMANDS.add(
 )
 
 # The scenario schema cannot import the supervisor; its keys must be the scenario commands.
-if set(COMMAND_KINDS) != {c.name for c in COMMANDS if c.scenario}:
+if set(COMMAND_KINDS) != {e.name for e in COMMANDS.entries() if e.item.scenario}:
     raise RuntimeError(f"scenario command keys {COMMAND_KINDS} differ from the registry's")

@@ -13,10 +13,13 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from swarmpark.assign import ASSIGNMENT_COSTS as _COSTS
+from swarmpark.control.modes import AVOIDANCE_MODES
 from swarmpark.core.geometry import (
     Footprint,
     GeometryError,
 )
+from swarmpark.layout.methods import LAYOUT_METHODS as _METHODS
 
 __all__ = [
     "Scenario",
@@ -33,9 +36,10 @@ __all__ = [
     "ASSIGNMENT_COSTS",
 ]
 
-LAYOUT_METHODS = ("stacking", "potential", "convex")
+# The choices of methods, costs and avoidance live in their registries; names at import:
+LAYOUT_METHODS = _METHODS.names()
 COMMAND_KINDS = ("park", "goto", "formation", "stop", "estop", "resume")
-ASSIGNMENT_COSTS = ("sequential", "euclidean", "formation", "path")
+ASSIGNMENT_COSTS = _COSTS.names()
 
 Point = Annotated[list[float], Field(min_length=2, max_length=2)]
 PoseDeg = Annotated[list[float], Field(min_length=3, max_length=3)]
@@ -114,9 +118,9 @@ class ParkCmd(_Model):
     robots: Annotated[list[str], Field(min_length=1)]
     boundary: list[Point]
     heading_deg: float | Literal["auto"] = 0.0
-    method: Literal["stacking", "potential", "convex"] = "stacking"
+    method: Annotated[str, _METHODS.as_field()] = "stacking"
     margin_m: NonNegFloat = 0.3
-    assignment: Literal["sequential", "euclidean", "formation", "path"] = "formation"
+    assignment: Annotated[str, _COSTS.as_field()] = "formation"
 
 
 class GotoCmd(_Model):
@@ -184,7 +188,7 @@ class NavigationSpec(_Model):
     """Navigation options: ``avoidance`` between skids is ``monitor`` (collision monitor with
     right of way at bottlenecks, the default) or ``rvo`` (ORCA with priorities)."""
 
-    avoidance: Literal["monitor", "rvo"] = "monitor"
+    avoidance: Annotated[str, AVOIDANCE_MODES.as_field()] = "monitor"
 
 
 class KidnapSpec(_Model):

@@ -16,7 +16,7 @@ import shapely
 
 from swarmpark.apps.bench import register, time_call
 from swarmpark.core.geometry import Footprint
-from swarmpark.layout import METHODS, capacity, layout
+from swarmpark.layout import LAYOUT_METHODS, capacity, layout
 from swarmpark.layout.validate import footprint_polygons
 
 SKID = Footprint(1.2, 0.8, pivot_from_rear_m=0.3)
@@ -27,7 +27,7 @@ ROOM = 1.6
 SPARE = 1.25
 #: Growth factor (linear) per step while sizing a boundary.
 GROWTH = 1.05
-#: Targets from the issue, at N = 50 (milliseconds).
+#: Targets from the issue, at N = 50 (milliseconds); a method without one is only timed.
 TARGET_MS = {"stacking": 100.0, "potential": 1000.0, "convex": 2000.0}
 
 
@@ -102,7 +102,7 @@ def bench_speed(quick: bool) -> list[dict]:
         ]
     rows = []
     for shape, n, boundary in cases:
-        for method in METHODS:
+        for method in LAYOUT_METHODS.names():
             res = layout(boundary, [SKID] * n, method=method, margin_m=MARGIN_M)
             repeat = 1 if quick or (method == "convex" and n >= 100) else 3
             t = time_call(
@@ -119,7 +119,7 @@ def bench_speed(quick: bool) -> list[dict]:
                 **t,
                 "iterations": res.report["iterations"],
             }
-            if n == 50:
+            if n == 50 and method in TARGET_MS:
                 row["target_ms"] = TARGET_MS[method]
                 row["meets_target"] = "yes" if t["median_ms"] < TARGET_MS[method] else "NO"
             rows.append(row)
@@ -145,7 +145,7 @@ def bench_quality(quick: bool) -> list[dict]:
     rows = []
     for name, is_convex, n, boundary in quality_cases(quick):
         spacing = {}
-        for method in METHODS:
+        for method in LAYOUT_METHODS.names():
             res = layout(boundary, [SKID] * n, method=method, margin_m=MARGIN_M)
             gaps = _gaps(res)
             spacing[method] = res.report["min_spacing_m"]

@@ -1,1 +1,2 @@
-"""One router per resource: simulation control, operator commands, state."""
+"""One router per resource: simulation control, operator commands, state, meta (choices and
+limits)."""

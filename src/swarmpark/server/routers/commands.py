@@ -65,7 +65,7 @@ def _endpoint(spec: CommandDef):
     return endpoint
 
 
-for _spec in COMMANDS:
+for _spec in (e.item for e in COMMANDS.entries()):
     if _spec.route:
         router.add_api_route(
             f"/{_spec.name}",

@@ -8,14 +8,13 @@ const STATE_COLOURS = {
   estopped: "#e0242c", teleop: "#a66bff", stuck: "#ff4fd8",
 };
 const PATH_COLOUR = "#4cd964";
-const SPEED_MIN = 0.05, SPEED_MAX = 100;
-const TELEOP_PERIOD_MS = 100;
 const GAMEPAD_DEADZONE = 0.15;
 
 // ------------------------------------------------------------------ state
 
 const S = {
   world: null,          // GET /api/world
+  meta: null,           // GET /api/meta: layout methods, assignment costs, limits
   mapImg: null,         // the occupancy map image
   frame: null,          // latest frame merged with the slow parts
   frames: [],           // recent frames (t_s, estop, robots) for tests and debugging
@@ -694,7 +693,10 @@ async function togglePause() {
 
 async function setSpeed(factor) {
   const cur = S.frame && S.frame.sim ? S.frame.sim.speed : 1;
-  const speed = Math.min(SPEED_MAX, Math.max(SPEED_MIN, +(cur * factor).toPrecision(3)));
+  const lim = S.meta ? S.meta.limits.sim_speed : { min: null, max: null };
+  let speed = +(cur * factor).toPrecision(3);
+  if (lim.max !== null) speed = Math.min(lim.max, speed);
+  if (lim.min !== null) speed = Math.max(lim.min, speed);
   await command("/api/sim", { speed });
 }
 
@@ -732,7 +734,7 @@ function teleopCommand() {
 }
 
 async function takeOver() {
-  if (S.selection.size !== 1) return;
+  if (S.selection.size !== 1 || !S.meta) return;
   const robot = [...S.selection][0];
   const r = await command("/api/teleop", { robot, v_mps: 0, omega_radps: 0 });
   if (!r.ok) return;
@@ -748,7 +750,7 @@ async function takeOver() {
     $("teleop-cmd").textContent = `v ${v.toFixed(2)} m/s  ω ${deg(w).toFixed(0)}°/s`;
     const res = await api("/api/teleop", { robot: S.teleop.robot, v_mps: v, omega_radps: w });
     if (!res.ok && S.teleop.robot) { toast(why(res)); stopTeleop(); }
-  }, TELEOP_PERIOD_MS);
+  }, S.meta.limits.teleop.send_period_s * 1000);
   updateSelectionPanel();
 }
 
@@ -815,11 +817,49 @@ async function checkAuth() {
   updateSelectionPanel();
 }
 
+// The choices and limits come from the server (its registries and request schemas).
+function fillSelect(sel, choices, chosen) {
+  const keep = sel.value;
+  sel.replaceChildren(...choices.map((c) => {
+    const o = document.createElement("option");
+    o.value = c.name;
+    o.textContent = c.name;
+    o.title = c.description;
+    return o;
+  }));
+  sel.value = choices.some((c) => c.name === keep) ? keep : chosen;
+}
+
+function setRange(input, range) {
+  for (const k of ["min", "max", "step"]) {
+    if (range[k] === null || range[k] === undefined) input.removeAttribute(k);
+    else input.setAttribute(k, range[k]);
+  }
+}
+
+async function loadMeta() {
+  const r = await api("/api/meta", undefined, "GET");
+  if (!r.ok) { toast("cannot read the methods and limits: " + why(r)); return; }
+  const first = !S.meta;
+  S.meta = r.data;
+  fillSelect($("park-method"), r.data.layout_methods, r.data.defaults.method);
+  fillSelect($("park-assign"), r.data.assignment_costs, r.data.defaults.assignment);
+  const lim = r.data.limits;
+  setRange($("park-margin"), lim.margin_m);
+  setRange($("park-heading"), lim.heading_deg);
+  $("park-auto").closest("label").classList.toggle("hidden", !lim.heading_deg.special.includes("auto"));
+  if (first) {
+    $("park-margin").value = lim.margin_m.default;
+    $("park-heading").value = lim.heading_deg.default;
+  }
+}
+
 async function loadWorld(rev) {
   const r = await api("/api/world", undefined, "GET");
   if (!r.ok) return;
   const first = !S.world || S.world.file !== r.data.file;
   S.world = r.data;
+  loadMeta();  // refreshed with every scenario (robots_per_park is the fleet size)
   const img = new Image();
   img.onload = () => { S.dirty = true; };
   img.src = "/api/map?rev=" + S.world.rev;

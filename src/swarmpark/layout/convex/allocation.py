@@ -1,0 +1,311 @@
+"""Convex layout over the pieces of the free region: skids shared among the pieces in
+proportion to how many fit in each, moved between pieces while that raises the smallest
+spacing, then each piece solved with structured optimization; and the entry points
+:func:`solve` (given skids) and :func:`largest` (as many of one size as fit)."""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+from swarmpark.layout import stacking
+from swarmpark.layout.convex.pieces import CUT_WEIGHT, ConvexPiece, convex_pieces
+from swarmpark.layout.convex.program import ACTIVE_TOL_M, SOLVER, PieceSolution, solve_piece
+from swarmpark.layout.region import LayoutError, Region, Skids, describe_skids, make_skids
+
+__all__ = ["solve", "largest", "MAX_REBALANCE_ROUNDS"]
+
+#: Rounds of moving one skid from the tightest piece to the roomiest.
+MAX_REBALANCE_ROUNDS = 8
+
+
+def _piece_region(region: Region, piece: ConvexPiece) -> Region:
+    """A :class:`Region` for stacking inside one piece (keeps half the margin from cuts)."""
+    inner = piece.polygon.buffer(-region.margin * CUT_WEIGHT, join_style="mitre")
+    inner = inner.intersection(region.inner)
+    shapely.prepare(inner)
+    return Region(
+        region.heading,
+        piece.polygon,
+        piece.polygon,
+        shapely.Polygon(),
+        region.margin,
+        inner,
+        region.margin * CUT_WEIGHT,
+    )
+
+
+def _stack_capacity(region: Region, footprint_half: np.ndarray) -> int:
+    from swarmpark.core.geometry import Footprint
+
+    fp = Footprint(2 * float(footprint_half[0]), 2 * float(footprint_half[1]))
+    upper = int(region.free.area / (4 * footprint_half[0] * footprint_half[1])) + 1
+    return stacking.stack(region, make_skids([fp] * upper)).fits
+
+
+def _allocate(n: int, caps: np.ndarray) -> np.ndarray:
+    """Share ``n`` skids among pieces in proportion to capacity (largest remainder)."""
+    caps = np.asarray(caps, dtype=float)
+    if caps.sum() <= 0:
+        return np.zeros(len(caps), dtype=int)
+    share = np.minimum(n * caps / caps.sum(), caps)
+    counts = np.floor(share).astype(int)
+    order = np.argsort(-(share - counts), kind="stable")
+    k = 0
+    while counts.sum() < min(n, int(caps.sum())) and k < 10 * len(caps) + n:
+        i = order[k % len(order)]
+        if counts[i] < caps[i]:
+            counts[i] += 1
+        k += 1
+    return counts
+
+
+def solve(region: Region, skids: Skids) -> tuple[np.ndarray, dict]:
+    """Layout-frame centres ``(N, 2)`` by convex optimization, and details.
+
+    Raises
+    ------
+    LayoutError
+        The skids do not fit (``fits`` is how many do with this method).
+    """
+    n = len(skids)
+    pieces, how = _pieces_for(region, skids.half)
+    notices: list[str] = []
+    if how != "none":
+        notices.append(
+            f"convex: the free region is not convex; it was split into {len(pieces)} convex "
+            f"pieces by {how} (skids keep at least half the margin from each cut)"
+        )
+    result = _solve_pieces(region, skids, pieces)
+    if result is None:
+        fits = _largest_count(region, skids, pieces)
+        raise LayoutError(
+            f"park.boundary: only {fits} of {n} skids ({describe_skids(skids)}, margin "
+            f"{region.margin:g} m) fit with method 'convex'",
+            fits=fits,
+        )
+    centres, info = result
+    info["decomposition"] = how
+    info["notices"] = notices + info.get("notices", [])
+    return centres, info
+
+
+def _pieces_for(region: Region, half: np.ndarray) -> tuple[list[ConvexPiece], str]:
+    """Convex pieces, choosing the decomposition that stacks the most of the largest skid."""
+    big = half[np.argmax(half[:, 0] * half[:, 1])]
+
+    def score(pieces: list[ConvexPiece]) -> float:
+        total = sum(_stack_capacity(_piece_region(region, p), big) for p in pieces)
+        return total - 1e-3 * len(pieces)  # ties: fewer pieces
+
+    return convex_pieces(region.free, score)
+
+
+def _initial_counts(region: Region, skids: Skids, pieces: list[ConvexPiece]):
+    """``(counts, caps)``: skids per piece in proportion to capacity, and the capacities;
+    ``None`` if the pieces cannot take them all."""
+    n = len(skids)
+    half = skids.half
+    if len(pieces) == 1:
+        return np.array([n]), np.array([n])
+    big = half[np.argmax(half[:, 0] * half[:, 1])]
+    caps = np.array([_stack_capacity(_piece_region(region, p), big) for p in pieces])
+    if caps.sum() < n:
+        # Stacking with the largest size is only a guide for mixed sizes: let the pieces
+        # take more than it says, in proportion to area.
+        areas = np.array([p.polygon.area for p in pieces])
+        caps = np.maximum(
+            caps, np.ceil(n * areas / sum(p.polygon.area for p in pieces)).astype(int)
+        )
+    counts = _allocate(n, caps)
+    if counts.sum() < n:
+        return None
+    return counts, caps
+
+
+class _Pieces:
+    """The skids of one layout spread over the pieces: who goes where for given counts
+    (largest skids first, in piece order) and each piece's solution."""
+
+    def __init__(self, region: Region, skids: Skids, pieces: list[ConvexPiece]):
+        self.region = region
+        self.half = skids.half
+        self.pieces = pieces
+        self.order = np.argsort(-(self.half[:, 0] * self.half[:, 1]), kind="stable")
+
+    def groups(self, counts) -> list[np.ndarray]:
+        groups, k = [], 0
+        for c in counts:
+            groups.append(self.order[k : k + c])
+            k += c
+        return groups
+
+    def solve(
+        self, p: int, members: np.ndarray, *, structured: bool = False, plan=None
+    ) -> PieceSolution | None:
+        """Piece ``p`` holding ``members`` (the search solves without structure)."""
+        return solve_piece(
+            self.pieces[p], self.half[members], self.region.margin, structured=structured, plan=plan
+        )
+
+
+def _feasible(spread: _Pieces, counts: np.ndarray, caps: np.ndarray):
+    """Move skids out of infeasible pieces (into the one with the most spare capacity) until
+    every piece solves. ``(counts, solutions)`` or ``None``."""
+    n = len(spread.half)
+    counts = counts.copy()
+    solutions: dict[int, PieceSolution | None] = {}
+    for _ in range(n + len(spread.pieces)):
+        groups = spread.groups(counts)
+        solutions = {p: spread.solve(p, g) for p, g in enumerate(groups) if len(g)}
+        bad = [p for p, s in solutions.items() if s is None]
+        if not bad:
+            break
+        spare = caps - counts
+        p_bad = bad[0]
+        cand = [q for q in np.argsort(-spare, kind="stable") if q != p_bad and spare[q] > 0]
+        if not cand:
+            return None
+        counts[p_bad] -= 1
+        counts[cand[0]] += 1
+    else:
+        return None
+    if any(s is None for s in solutions.values()):
+        return None
+    return counts, solutions
+
+
+def _rebalance(spread: _Pieces, counts: np.ndarray, caps: np.ndarray, solutions: dict):
+    """Move one skid from the tightest piece to the roomiest while that raises the smallest
+    max-min spacing. Returns the new ``(counts, solutions)``."""
+    for _ in range(MAX_REBALANCE_ROUNDS if len(spread.pieces) > 1 else 0):
+        obj = {p: s.objective for p, s in solutions.items()}
+        worst = min(obj, key=lambda p: (obj[p], p))
+        roomy = [p for p in range(len(spread.pieces)) if p != worst and counts[p] < caps[p]]
+        if not roomy or counts[worst] <= 0:
+            break
+        best_p = max(roomy, key=lambda p: (obj.get(p, np.inf), -p))
+        trial = counts.copy()
+        trial[worst] -= 1
+        trial[best_p] += 1
+        groups = spread.groups(trial)
+        new = {p: spread.solve(p, groups[p]) for p in (worst, best_p) if len(groups[p])}
+        if any(s is None for s in new.values()):
+            break
+        new_obj = dict(obj)
+        new_obj.pop(worst, None)
+        new_obj.update({p: s.objective for p, s in new.items()})
+        if min(new_obj.values()) <= min(obj.values()) + ACTIVE_TOL_M:
+            break
+        counts = trial
+        solutions = {p: s for p, s in solutions.items() if p not in (worst, best_p)}
+        solutions.update(new)
+    return counts, solutions
+
+
+def _structured(spread: _Pieces, counts: np.ndarray, solutions: dict):
+    """Structured optimization in every piece, keeping each piece's column plan from the
+    search. ``(centres, info)`` or ``None``."""
+    n = len(spread.half)
+    centres = np.full((n, 2), np.nan)
+    details = []
+    iterations = 0
+    first = np.inf
+    for p, members in enumerate(spread.groups(counts)):
+        if len(members) == 0:
+            continue
+        prev = solutions.get(p)
+        plan = (
+            (prev.scheme, tuple(prev.columns))
+            if prev is not None and len(prev.columns) and sum(prev.columns) == len(members)
+            else None
+        )
+        sol = spread.solve(p, members, structured=True, plan=plan)
+        if sol is None:
+            return None
+        centres[members] = sol.corners + spread.half[members]
+        iterations = max(iterations, sol.iterations)
+        first = min(first, sol.objective)
+        details.append(
+            {
+                "piece": p,
+                "count": len(members),
+                "scheme": sol.scheme,
+                "columns": sol.columns,
+                "objective_m": sol.objective,
+                "structured_iterations": sol.iterations,
+                "held": sol.held,
+            }
+        )
+    info = {
+        "iterations": iterations,
+        "objective_m": first,
+        "pieces": details,
+        "solver": SOLVER,
+        "notices": [],
+    }
+    return centres, info
+
+
+def _solve_pieces(region: Region, skids: Skids, pieces: list[ConvexPiece], structured=True):
+    """Allocate skids to pieces and solve each; ``None`` if they cannot all be placed.
+
+    Without ``structured`` only feasibility is decided (the centres returned are zeros).
+    """
+    if not pieces:
+        return None
+    start = _initial_counts(region, skids, pieces)
+    if start is None:
+        return None
+    counts, caps = start
+    spread = _Pieces(region, skids, pieces)
+    found = _feasible(spread, counts, caps)
+    if found is None:
+        return None
+    counts, solutions = found
+    counts, solutions = _rebalance(spread, counts, caps, solutions)
+    if not structured:
+        return np.zeros((len(skids), 2)), {}
+    return _structured(spread, counts, solutions)
+
+
+def _largest_count(region: Region, skids: Skids, pieces: list[ConvexPiece]) -> int:
+    """How many of the skids (largest first dropped last) the convex method can place."""
+    order = np.argsort(-(skids.half[:, 0] * skids.half[:, 1]), kind="stable")
+    lo, hi = 0, len(skids) - 1  # the full set is known not to fit
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        sub = Skids(
+            tuple(skids.footprints[i] for i in order[-mid:]),
+            skids.half[order[-mid:]],
+            skids.offsets[order[-mid:]],
+        )
+        if _solve_pieces_feasible(region, sub, pieces):
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+def _solve_pieces_feasible(region: Region, skids: Skids, pieces: list[ConvexPiece]) -> bool:
+    return _solve_pieces(region, skids, pieces, structured=False) is not None
+
+
+def largest(region: Region, footprint, upper: int) -> tuple[np.ndarray, dict]:
+    """The largest convex layout of one footprint, trying at most ``upper`` skids.
+
+    Returns the centres ``(K, 2)`` (``K`` may be 0) and details.
+    """
+    pieces, _ = _pieces_for(region, make_skids([footprint]).half)
+    lo, hi = 0, upper
+    best = None
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        res = _solve_pieces(region, make_skids([footprint] * mid), pieces)
+        if res is not None:
+            lo, best = mid, res
+        else:
+            hi = mid - 1
+    if best is None:
+        return np.zeros((0, 2)), {"iterations": 0, "notices": ["convex: no skid fits"]}
+    return best
