@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from helpers import Scripted, make_world
 
-from swarmpark.control.nav.navigator import Navigator, NavParams, _RobotNav
+from swarmpark.control.nav.monitor import rollout
+from swarmpark.control.nav.navigator import Navigator, NavParams
 from swarmpark.supervisor.core import Supervisor
 
 
@@ -16,10 +17,13 @@ def _two_skids(a_pose, b_pose):
 
 def _navigator(view) -> Navigator:
     nav = Navigator(NavParams(avoidance="rvo"))
-    nav._robots = [_RobotNav() for _ in range(len(view.poses))]
-    nav._outlines(view)
-    nav._static_points(view)
+    nav.scene.update(view)
     return nav
+
+
+def _check(view, idx, raw, **kw):
+    nav = _navigator(view)
+    return nav.monitor.check(view, idx, raw, nav.scene, **kw).commands
 
 
 def test_rollout_follows_the_simulator_within_the_acceleration_limits():
@@ -30,7 +34,7 @@ def test_rollout_follows_the_simulator_within_the_acceleration_limits():
     sup.inbox.vel[:] = sup.sim.vel  # as the skid's odometry reports it (the view reads the link)
     view = sup.view()
     times = np.array([0.2, 0.5, 1.0])
-    predicted = _navigator(view)._rollout(view, np.array([0]), cmd[:, 0], cmd[:, 1], times)[0]
+    predicted = rollout(view, np.array([0]), cmd[:, 0], cmd[:, 1], times)[0]
     actual = []
     for _ in range(20):
         sup.sim.step(cmd)
@@ -48,13 +52,13 @@ def test_joint_check_stops_two_skids_that_would_swing_their_corners_together():
     view = sup.view()
     raw = np.array([[0.0, 0.3], [0.0, -0.3]])
     idx = np.array([0, 1])
-    alone = _navigator(view)._monitor(view, idx, raw)
+    alone = _check(view, idx, raw)
     assert np.array_equal(alone, raw)
-    together = _navigator(view)._monitor(view, idx, raw, joint=True)
+    together = _check(view, idx, raw, joint=True)
     assert np.array_equal(together, np.zeros((2, 2)))
     # Turning the same way, the corners move apart in step: both keep their commands.
     same = np.array([[0.0, 0.3], [0.0, 0.3]])
-    assert np.array_equal(_navigator(view)._monitor(view, idx, same, joint=True), same)
+    assert np.array_equal(_check(view, idx, same, joint=True), same)
 
 
 @pytest.mark.parametrize(
@@ -71,13 +75,17 @@ def test_keep_right_turns_oncoming_skids_and_fades_near_walls(y, expected):
     movers = np.array([True, True])
     both = np.array([0, 1])
     equal = np.array([1.0, 1.0])
-    turn = nav._keep_right(view, centres, u, equal, both, movers)
-    assert turn == pytest.approx(nav.params.rvo_keep_right_rad * expected * np.ones(2))
+
+    def keep_right(u, prio):
+        return nav.avoidance.keep_right(view, centres, u, prio, both, movers, nav.scene)
+
+    turn = keep_right(u, equal)
+    assert turn == pytest.approx(nav.params.rvo.keep_right_rad * expected * np.ones(2))
     # The lower priority (b: a third of a's) takes the larger share of the turn.
-    low = nav._keep_right(view, centres, u, np.array([3.0, 1.0]), both, movers)
+    low = keep_right(u, np.array([3.0, 1.0]))
     assert low[1] > 1.5 * low[0] > 0.0
     # Going the same way, or with the other one behind: no turn.
     same = np.array([[0.5, 0.0], [0.5, 0.0]])
-    assert not nav._keep_right(view, centres, same, equal, both, movers).any()
+    assert not keep_right(same, equal).any()
     apart = np.array([[-0.5, 0.0], [0.5, 0.0]])
-    assert not nav._keep_right(view, centres, apart, equal, both, movers).any()
+    assert not keep_right(apart, equal).any()

@@ -14,6 +14,12 @@ import numpy as np
 from swarmpark.assign import AssignmentError, bottleneck_assignment
 from swarmpark.core.geometry import point_segment_distance, wrap_angle
 from swarmpark.core.gridmap import OccupancyGrid
+from swarmpark.core.progress import (
+    REPORT_HEADING_LEVER_M,
+    REPORT_PROGRESS_M,
+    made_progress,
+    remaining_m,
+)
 from swarmpark.plan.grid import build_costmap, path_length_matrix
 
 __all__ = [
@@ -28,10 +34,10 @@ POSITION_TOL_M = 0.10
 HEADING_TOL_RAD = np.deg2rad(5.0)
 #: A robot with an unreached goal and no progress for this long is in deadlock.
 DEADLOCK_WINDOW_S = 10.0
-#: Progress means the remaining distance fell by at least this much below its best so far.
-PROGRESS_M = 0.05
-#: Heading error counts toward the remaining distance at this lever arm (m per rad).
-HEADING_LEVER_M = 0.5
+#: Progress (defined in core.progress): the remaining distance, heading counted at this lever
+#: arm (m per rad), fell by at least this much below its best so far.
+HEADING_LEVER_M = REPORT_HEADING_LEVER_M
+PROGRESS_M = REPORT_PROGRESS_M
 #: Above this many goals the lower bound uses straight-line distances (no Dijkstra runs).
 LOWER_BOUND_PATH_GOALS = 30
 #: Largest ratio of an 8-connected grid path length to the Euclidean length it stands for.
@@ -137,8 +143,8 @@ class MetricsRecorder:
         self._entered[~inside] = np.nan
 
         # Deadlocks: an unreached goal and no progress for DEADLOCK_WINDOW_S.
-        remaining = pos_err + HEADING_LEVER_M * head_err
-        improved = remaining < self._best - PROGRESS_M
+        remaining = remaining_m(pos_err, head_err, HEADING_LEVER_M)
+        improved = made_progress(remaining, self._best, PROGRESS_M)
         reset = improved | paused | inside | ~has_goal
         self._best = np.where(reset, remaining, self._best)
         self._best_t = np.where(reset, t, self._best_t)

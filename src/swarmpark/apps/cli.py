@@ -76,8 +76,23 @@ def cmd_run(args) -> int:
         world = build_world(load_scenario(args.scenario))
     except ScenarioError as exc:
         return _fail(f"{args.scenario}: {exc}")
+    observers = []
+    if args.record:
+        from swarmpark.record import RecordConfig, Recorder
+        from swarmpark.record.sinks import McapSink
+
+        try:
+            config = RecordConfig(rate_hz=args.record_rate, scan_rate_hz=args.scan_rate)
+            sink = McapSink(args.record)
+        except (ValueError, OSError) as exc:
+            return _fail(f"run --record: {exc}")
+        observers.append(Recorder([sink], config, meta={"file": Path(args.scenario).name}))
     show = sys.stderr.isatty() and not args.quiet
-    out = run_world(world, progress=terminal_progress if show else None)
+    try:
+        out = run_world(world, progress=terminal_progress if show else None, observers=observers)
+    finally:
+        for o in observers:
+            o.on_end(o.sup)  # closes the file if the run failed (a no-op after a clean end)
     if show:
         sys.stderr.write("\n")
     if args.out:
@@ -89,6 +104,23 @@ def cmd_run(args) -> int:
     else:
         _print_table(out.result)
     return EXIT_OK if out.result["expect_met"] else EXIT_FAILED
+
+
+def _rate(text: str) -> float | None:
+    """A rate in Hz; 0 means "every sample" (``None``)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (v >= 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be >= 0 Hz (got {text!r})")
+    return v or None
+
+
+def cmd_replay(args) -> int:
+    from swarmpark.record.replay import replay_command
+
+    return replay_command(args)
 
 
 # ----------------------------------------------------------------------------- bench
@@ -231,7 +263,24 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true", help="print the result as JSON")
     r.add_argument("--out", metavar="DIR", help="write result.json, trajectories.npz, run.png")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--record", metavar="FILE.mcap", help="record the run as MCAP (ROS 2 types)")
+    r.add_argument(
+        "--record-rate", type=_rate, default=10.0, metavar="HZ",
+        help="poses and states per simulated second in the recording (0: every tick)",
+    )  # fmt: skip
+    r.add_argument(
+        "--scan-rate", type=_rate, default=5.0, metavar="HZ",
+        help="LIDAR scans per simulated second in the recording (0: with every pose sample)",
+    )  # fmt: skip
     r.set_defaults(func=cmd_run)
+
+    rp = sub.add_parser("replay", help="replay a recorded run (MCAP) in the browser UI")
+    rp.add_argument("file", help="recording (.mcap) written by run --record or serve --record")
+    rp.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    rp.add_argument("--port", type=int, default=8001, help="TCP port (default 8001)")
+    rp.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    rp.add_argument("--check", action="store_true", help="only read the file and print a summary")
+    rp.set_defaults(func=cmd_replay)
 
     b = sub.add_parser("bench", help="run the timing and quality benchmarks")
     b.add_argument("--only", nargs="*", metavar="PREFIX", help="benchmarks whose name starts so")

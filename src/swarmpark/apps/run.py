@@ -9,18 +9,31 @@ from __future__ import annotations
 import json
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import World
 
-__all__ = ["run_world", "check_expect", "write_outputs", "RunOutput"]
+__all__ = ["run_world", "check_expect", "write_outputs", "RunOutput", "RunObserver"]
 
 #: A run ends early once everything is settled for this long (and nothing is pending).
 SETTLE_S = 1.0
+
+
+class RunObserver(Protocol):
+    """Watches a run from outside the tick (a recorder): called after the supervisor is made,
+    after every tick, and once at the end with the result. It may read the supervisor and
+    must not change it. (A server also calls ``on_command`` and ``on_alarm``.)"""
+
+    def on_start(self, sup: Supervisor) -> None: ...
+
+    def on_tick(self, sup: Supervisor) -> None: ...
+
+    def on_end(self, sup: Supervisor, result: dict | None = None) -> None: ...
 
 
 class RunOutput:
@@ -47,9 +60,16 @@ def run_world(
     controller=None,
     progress: Callable[[float, float], None] | None = None,
     record_every: int = 1,
+    observers: Sequence[RunObserver] = (),
 ) -> RunOutput:
-    """Run ``world`` until ``duration_s`` or until settled; returns the result and trajectories."""
+    """Run ``world`` until ``duration_s`` or until settled; returns the result and trajectories.
+
+    ``observers`` (e.g. a :class:`swarmpark.record.Recorder`) see the start, every tick
+    (outside the timed part, so ``tick_ms`` is the core's alone) and the result.
+    """
     sup = Supervisor(world, controller=controller)
+    for o in observers:
+        o.on_start(sup)
     scn = world.scenario
     n_ticks = int(round(scn.duration_s / scn.dt_s))
     times, poses, people = [0.0], [sup.sim.poses.copy()], [sup.sim.person_positions()]
@@ -59,6 +79,8 @@ def run_world(
         t0 = time.perf_counter()
         sup.tick()
         sup.metrics.tick_ms.append((time.perf_counter() - t0) * 1e3)
+        for o in observers:
+            o.on_tick(sup)
         if (k + 1) % record_every == 0:
             times.append(sup.t)
             poses.append(sup.sim.poses.copy())
@@ -96,6 +118,8 @@ def run_world(
         ]
     result["expect"] = scn.expect.model_dump(exclude_none=True)
     result["expect_met"], result["expect_failures"] = check_expect(result, scn.expect)
+    for o in observers:
+        o.on_end(sup, result)
     return RunOutput(result, np.asarray(times), np.stack(poses), np.stack(people), sup)
 
 

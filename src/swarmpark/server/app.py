@@ -8,6 +8,7 @@ also runs the pacing task, so commands are applied between ticks.
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Sequence
 from pathlib import Path
 
 from fastapi import FastAPI, Request
@@ -106,6 +107,7 @@ def create_app(
     speed: float = 1.0,
     autostart: bool = True,
     scripted: bool = True,
+    observers: Sequence = (),
 ) -> FastAPI:
     """Build the operator-interface app for one scenario.
 
@@ -124,6 +126,10 @@ def create_app(
         Run the simulation as soon as the server starts; ``False`` starts it paused.
     scripted
         Run the scenario's own timed commands.
+    observers
+        Watchers of every run (:class:`swarmpark.record.live.LiveRecording`,
+        :class:`swarmpark.record.audit.AuditLog`); with any, every ``POST /api/...`` is
+        also passed to their ``on_command`` as an audit entry (client, token, answer).
 
     Raises
     ------
@@ -134,7 +140,7 @@ def create_app(
     path = Path(scenario_path) if scenario_path is not None else default_scenario(sdir)
     if token is not None and not token.strip():
         raise ValueError("token: must not be empty")
-    session = Session(path, speed=speed, running=autostart, scripted=scripted)
+    session = Session(path, speed=speed, running=autostart, scripted=scripted, observers=observers)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -154,6 +160,10 @@ def create_app(
     app.state.token = token
     app.state.scenarios_dir = sdir.resolve()
     app.add_exception_handler(RequestValidationError, _validation_error)  # type: ignore[arg-type]
+    if observers:
+        from swarmpark.record.audit import AuditMiddleware
+
+        app.add_middleware(AuditMiddleware)
     app.include_router(sim.router)
     app.include_router(commands.router)
     app.include_router(state.router)

@@ -52,6 +52,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-script", action="store_true", help="ignore the scenario's own timed commands"
     )
+    p.add_argument(
+        "--record", metavar="DIR", help="record every run as MCAP (ROS 2 types) into DIR"
+    )
+    p.add_argument(
+        "--foxglove", nargs="?", type=int, const=8765, metavar="PORT",
+        help="stream the recorded channels to Foxglove (WebSocket, default port 8765)",
+    )  # fmt: skip
+    p.add_argument(
+        "--foxglove-host", default="127.0.0.1",
+        help="address the Foxglove server binds (default 127.0.0.1)",
+    )  # fmt: skip
+    p.add_argument(
+        "--audit", metavar="FILE",
+        help="operator audit log, JSON lines, rotated (default: DIR/audit.jsonl with --record, "
+        "else ~/.local/state/swarmpark/audit.jsonl)",
+    )  # fmt: skip
+    p.add_argument(
+        "--record-rate",
+        type=float,
+        default=10.0,
+        metavar="HZ",
+        help="pose samples per simulated second in the recording (0: every tick)",
+    )
+    p.add_argument(
+        "--scan-rate",
+        type=float,
+        default=5.0,
+        metavar="HZ",
+        help="LIDAR scans per simulated second in the recording (0: with every pose sample)",
+    )
     return p
 
 
@@ -67,6 +97,50 @@ def _check(args) -> None:
         )
     if args.token is not None and not args.token.strip():
         raise _BadInput("swarmpark serve: error: --token must not be empty")
+    if args.foxglove is not None and not 0 <= args.foxglove < 65536:
+        raise _BadInput(
+            f"swarmpark serve: error: --foxglove must be 0..65535 (got {args.foxglove})"
+        )
+    for name in ("record_rate", "scan_rate"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v >= 0):
+            flag = "--" + name.replace("_", "-")
+            raise _BadInput(f"swarmpark serve: error: {flag} must be >= 0 Hz (got {v})")
+
+
+def _observers(args) -> tuple[list, list[str]]:
+    """The audit log (always: nothing is kept only in memory), the recorder, Foxglove; and
+    the lines that tell the operator where they are (printed once the server starts)."""
+    from pathlib import Path
+
+    from swarmpark.record.audit import AuditLog, default_audit_path
+    from swarmpark.record.live import LiveRecording
+    from swarmpark.record.recorder import RecordConfig
+
+    if args.audit:
+        audit_path = Path(args.audit)
+    elif args.record:
+        audit_path = Path(args.record) / "audit.jsonl"
+    else:
+        audit_path = default_audit_path()
+    observers: list = [AuditLog(audit_path)]
+    notes = [f"audit log {audit_path}"]
+    if args.record or args.foxglove is not None:
+        live = LiveRecording(
+            directory=args.record,
+            foxglove_port=args.foxglove,
+            foxglove_host=args.foxglove_host,
+            # 0 Hz: every tick (as for `swarmpark run`).
+            config=RecordConfig(
+                rate_hz=args.record_rate or None, scan_rate_hz=args.scan_rate or None
+            ),
+        )
+        observers.append(live)
+        if args.record:
+            notes.append(f"recording into {args.record}/")
+        if live.foxglove_port is not None:
+            notes.append(f"Foxglove on ws://{args.foxglove_host}:{live.foxglove_port}")
+    return observers, notes
 
 
 def _is_loopback(host: str) -> bool:
@@ -89,18 +163,28 @@ def serve_command(argv: list[str]) -> int:
         except SystemExit as exc:  # -h / --help printed the usage
             return int(exc.code or 0)
         _check(args)
-        app = create_app(
-            args.scenario,
-            token=args.token,
-            scenarios_dir=args.scenarios_dir,
-            speed=args.speed,
-            autostart=not args.paused,
-            scripted=not args.no_script,
-        )
+        try:
+            observers, notes = _observers(args)
+        except (OSError, RuntimeError) as exc:  # the Foxglove port in use (FoxgloveError)
+            raise _BadInput(f"swarmpark serve: error: --record/--audit/--foxglove: {exc}") from None
+        try:
+            app = create_app(
+                args.scenario,
+                token=args.token,
+                scenarios_dir=args.scenarios_dir,
+                speed=args.speed,
+                autostart=not args.paused,
+                scripted=not args.no_script,
+                observers=observers,
+            )
+        except BaseException:
+            for o in observers:
+                o.close()
+            raise
     except _BadInput as exc:
         sys.stderr.write(f"{exc}\n")
         return EXIT_BAD_INPUT
-    except (ScenarioError, FileNotFoundError, ValueError) as exc:
+    except (ScenarioError, OSError, ValueError) as exc:  # OSError: the record dir, the audit file
         sys.stderr.write(f"swarmpark serve: error: {exc}\n")
         return EXIT_BAD_INPUT
     import uvicorn
@@ -110,6 +194,8 @@ def serve_command(argv: list[str]) -> int:
             f"swarmpark serve: warning: listening on {args.host} without --token: "
             "anyone on the network can command the swarm\n"
         )
+    for note in notes:
+        sys.stderr.write(f"swarmpark serve: {note}\n")
     shown = f"[{args.host}]" if ":" in args.host else args.host
     sys.stderr.write(f"swarmpark serve: operator interface on http://{shown}:{args.port}/\n")
     try:

@@ -14,7 +14,7 @@ import json
 import logging
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -87,6 +87,11 @@ class Session:
         Run the scenario's own timed commands (else the operator gives every command).
     clock
         Wall clock (seconds) for the teleop dead-man; injectable for tests.
+    observers
+        Watch every run of the session (:class:`swarmpark.apps.run.RunObserver`: a recorder,
+        the audit log): ``on_start`` with each new supervisor (load, reset), ``on_tick``
+        after each tick, ``on_end`` with the result when a run is replaced or the server
+        stops; ``on_command``/``on_alarm`` where they have them.
     """
 
     def __init__(
@@ -97,7 +102,9 @@ class Session:
         running: bool = True,
         scripted: bool = True,
         clock: Callable[[], float] = time.monotonic,
+        observers: Sequence = (),
     ) -> None:
+        self.observers = list(observers)
         self.speed = float(speed)
         self.clock = clock
         self.paused = not running
@@ -138,7 +145,10 @@ class Session:
         self._start(self.world)
 
     def _start(self, world: World) -> None:
+        self._end_observers()
         self.sup = Supervisor(world)
+        for o in self.observers:
+            o.on_start(self.sup)
         self.encoder = FrameEncoder(self.sup)
         self.rev += 1
         self.error = None
@@ -148,6 +158,27 @@ class Session:
         self._map_png: bytes | None = None
         for c in self.clients:
             c.needs_full = True
+
+    def _end_observers(self) -> None:
+        """Tell the observers the current run is over (with its result)."""
+        sup = getattr(self, "sup", None)
+        if sup is None or not self.observers or getattr(self, "_ended", None) is sup:
+            return
+        self._ended = sup
+        result = {
+            "scenario": sup.world.scenario.name,
+            **sup.metrics.result(sup.t, sup.sim.poses, sup.goals, sup.has_goal),
+            "commands": [o.as_dict() for o in sup.outcomes],
+        }
+        for o in self.observers:
+            o.on_end(sup, result)
+
+    def alarm(self, entry: dict) -> None:
+        """Pass an alarm (e.g. a failed tick) to the observers that take them."""
+        for o in self.observers:
+            fn = getattr(o, "on_alarm", None)
+            if fn is not None:
+                fn(entry)
 
     def describe(self) -> dict:
         scn = self.world.scenario
@@ -218,6 +249,8 @@ class Session:
         self.tick_ms.append(ms)
         self._tick_wall_ms += ms
         self._cpu_ms += (time.process_time() - c0) * 1e3
+        for o in self.observers:
+            o.on_tick(self.sup)
 
     def step(self, ticks: int) -> None:
         """Run ``ticks`` ticks now; a failing tick pauses the session with :attr:`error`."""
@@ -233,6 +266,7 @@ class Session:
         log.exception("simulation tick failed")
         self.error = f"simulation stopped: {type(exc).__name__}: {exc}"
         self.paused = True
+        self.alarm({"kind": "tick-error", "error": self.error})
 
     def due(self, wall_elapsed_s: float) -> int:
         """How many ticks are due after ``wall_elapsed_s`` more of wall time (consumed)."""
@@ -394,3 +428,8 @@ class Session:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
+        self._end_observers()
+        for o in self.observers:
+            close = getattr(o, "close", None)
+            if close is not None:
+                close()

@@ -1,0 +1,150 @@
+"""Making room (RVO): a parked skid standing in another's way moves aside along its own axis.
+
+The corridors are the paths (rear to ``lookahead_m`` ahead) of the skids on the move and the
+walks of people, widened by the mover's half-width plus ``clearance_m``. A settled skid inside
+one drives along its axis to the nearer side that is clear of every corridor and of static
+solids, keeping the side it chose while it stays in the way, and waits there while its own
+spot is still in the way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from swarmpark.control.base import ControlView
+from swarmpark.control.nav.follower import PathState, path_ahead
+from swarmpark.control.nav.params import MakeRoomParams
+from swarmpark.control.nav.scene import Scene
+from swarmpark.core.geometry import footprint_corners
+
+__all__ = ["MakeRoom", "RoomResult", "RoomState"]
+
+#: People slower than this stand still: they have no walk ahead to keep clear.
+_WALKING_MPS = 1e-6
+
+
+@dataclass
+class RoomState:
+    """Side (+1 along the heading, -1 against it) this skid last made room to, or 0."""
+
+    side: int = 0
+
+
+@dataclass(frozen=True)
+class RoomResult:
+    """Per skid ``(N,)``: signed speed along its axis, whether it stands aside (making room or
+    waiting aside), and whether it moves off its spot (it must dock again afterwards)."""
+
+    speed: np.ndarray
+    aside: np.ndarray
+    undock: np.ndarray
+
+
+class MakeRoom:
+    """See the module docstring.
+
+    Parameters
+    ----------
+    params
+        :class:`~swarmpark.control.nav.params.MakeRoomParams`.
+    """
+
+    def __init__(self, params: MakeRoomParams) -> None:
+        self.params = params
+        n = int(round(params.shift_max_m / params.shift_step_m))
+        steps = np.arange(1, n + 1) * params.shift_step_m
+        self.shifts = np.concatenate([steps, -steps])  # candidate moves along the axis, m
+
+    def corridors(self, view: ControlView, settled, paths: list[PathState], scene: Scene):
+        """The ways the movers (skids not settled, walking people) will take (shapely)."""
+        p = self.params
+        out = []
+        for j in np.flatnonzero(view.active & ~settled):
+            line = path_ahead(view, j, paths[j], p.lookahead_m)
+            half = view.footprints[j].width_m / 2 + p.clearance_m
+            out.append(shapely.LineString(line).buffer(half, cap_style="flat"))
+            # The skid itself as it stands (it may be turning on the spot).
+            out.append(shapely.Polygon(scene.corners_now(view, j)).buffer(p.clearance_m))
+        walking = (
+            np.linalg.norm(view.people_vel, axis=1) > _WALKING_MPS if len(view.people_xy) else []
+        )
+        for k in np.flatnonzero(walking):
+            v = view.people_vel[k]
+            ahead = view.people_xy[k] + v / np.linalg.norm(v) * p.lookahead_m
+            half = view.people_radius[k] + p.clearance_m
+            out.append(shapely.LineString([view.people_xy[k], ahead]).buffer(half))
+        return out
+
+    def step(
+        self,
+        view: ControlView,
+        settled: np.ndarray,
+        paths: list[PathState],
+        rooms: list[RoomState],
+        scene: Scene,
+    ) -> RoomResult:
+        """Speeds along the axis of the settled skids (``settled``) that stand in a way."""
+        n = len(view.poses)
+        res = RoomResult(np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
+        corridors = self.corridors(view, settled, paths, scene)
+        free = settled & ~view.stopped if view.stopped is not None else settled
+        cand = np.flatnonzero(free)
+        if not corridors or not len(cand):
+            for i in cand:
+                rooms[i].side = 0
+            return res
+        way = shapely.union_all(corridors)
+        shapely.prepare(way)
+        plain = scene.skids.plain
+        inside = shapely.intersects(
+            way, shapely.polygons(footprint_corners(view.poses[cand], plain[cand]))
+        )
+        # Skids that stood aside wait there while their own spot is still in the way.
+        goal_feet = shapely.polygons(footprint_corners(view.goals[cand], plain[cand]))
+        spot_taken = shapely.intersects(way, goal_feet)
+        for i, hit, taken in zip(cand, inside, spot_taken, strict=True):
+            st = rooms[i]
+            if not hit:
+                if st.side and taken:
+                    res.aside[i] = True
+                else:
+                    st.side = 0
+                continue
+            res.aside[i] = True
+            best = self._nearest_free_shift(view, i, way, st.side, scene)
+            if best is None:
+                continue
+            st.side = int(np.sign(best))
+            res.undock[i] = True  # dock again precisely once the way is clear
+            p = self.params
+            res.speed[i] = np.clip(
+                p.gain_per_s * (best + np.sign(best) * p.overshoot_m),
+                -view.max_speed[i],
+                view.max_speed[i],
+            )
+        return res
+
+    def _nearest_free_shift(self, view, i, way, side: int, scene: Scene) -> float | None:
+        """The smallest shift along skid ``i``'s axis clear of ``way`` and static solids, on
+        its previous ``side`` if it has one and that side is free, else on the nearer side."""
+        shifts = self.shifts
+        head = np.array([np.cos(view.poses[i, 2]), np.sin(view.poses[i, 2])])
+        poses = np.repeat(view.poses[i][None], len(shifts), axis=0)
+        poses[:, :2] += shifts[:, None] * head
+        moved = shapely.polygons(footprint_corners(poses, scene.skids.plain[[i] * len(shifts)]))
+        free = ~shapely.intersects(way, moved)
+        blocked, _ = scene.static.tree.query(moved, predicate="intersects")
+        free[blocked] = False
+        best = None
+        for s in ([side] if side else []) + [1, -1]:
+            ok = np.flatnonzero(free & (np.sign(shifts) == s))
+            if len(ok):
+                t = shifts[ok[np.argmin(np.abs(shifts[ok]))]]
+                if best is None or (s == side) or abs(t) < abs(best):
+                    best = t
+                if s == side:
+                    break
+        return best

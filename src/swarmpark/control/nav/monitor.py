@@ -1,0 +1,212 @@
+"""The collision monitor (as Navigation2's): each command is simulated forward over a short
+horizon, within the acceleration limits, and slowed or stopped before any contact with static
+solids, other skids (where they stand) and people (walking on)."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from scipy.spatial import cKDTree
+
+from swarmpark.control.base import ControlView
+from swarmpark.control.nav.params import MonitorParams
+from swarmpark.control.nav.scene import Scene
+from swarmpark.core.geometry import (
+    TOUCH_TOLERANCE_M,
+    convex_overlap,
+    footprint_corners,
+    integrate_unicycle,
+    rect_disc_gap,
+)
+
+__all__ = ["CollisionMonitor", "MonitorResult", "rollout"]
+
+
+def rollout(
+    view: ControlView, rows: np.ndarray, v_cmd: np.ndarray, w_cmd, times: np.ndarray
+) -> np.ndarray:
+    """Poses ``(len(rows), T, 3)`` of skids ``rows`` at ``times`` under the commands held,
+    from their current velocities within the acceleration limits (a skid turning fast
+    cannot stop turning at once), integrated in control steps as the simulator does
+    (:func:`~swarmpark.core.geometry.integrate_unicycle`)."""
+    n_sub = max(1, int(round(times[-1] / view.dt)))
+    sub_dt = times[-1] / n_sub
+    record = np.clip(np.round(times / sub_dt), 1, n_sub).astype(int)
+    v, w = view.vel[rows, 0], view.vel[rows, 1]
+    dv = view.max_accel[rows] * sub_dt
+    dw = np.inf if view.max_yaw_accel is None else view.max_yaw_accel[rows] * sub_dt
+    now = view.poses[rows]
+    pose = np.empty((len(rows), len(times), 3))
+    for step in range(1, n_sub + 1):
+        v = v + np.clip(v_cmd - v, -dv, dv)
+        w = w + np.clip(w_cmd - w, -dw, dw)
+        now = integrate_unicycle(now, v, w, sub_dt)
+        pose[:, record == step] = now[:, None]
+    return pose
+
+
+@dataclass(frozen=True)
+class MonitorResult:
+    """The safe commands ``(len(idx), 2)``, per row the skids that slowed it at full speed
+    (empty unless it was slowed), and whether it was slowed."""
+
+    commands: np.ndarray
+    blockers: list[set[int]]
+    slowed: np.ndarray
+
+
+class CollisionMonitor:
+    """Scales each command down until its forward simulation is collision-free.
+
+    Parameters
+    ----------
+    params
+        :class:`~swarmpark.control.nav.params.MonitorParams`.
+    """
+
+    def __init__(self, params: MonitorParams) -> None:
+        self.params = params
+        p = params
+        self.scales = np.asarray(p.scales)
+        self.times = np.linspace(p.horizon_s / p.samples, p.horizon_s, p.samples)
+
+    def check(
+        self,
+        view: ControlView,
+        idx: np.ndarray,
+        raw: np.ndarray,
+        scene: Scene,
+        *,
+        robots: bool = True,
+        joint: bool = False,
+    ) -> MonitorResult:
+        """Safe commands for robots ``idx`` commanded ``raw`` (others where they are now);
+        with ``joint``, also stop pairs whose commands together would bring them into
+        contact (:meth:`joint_check`). ``robots=False`` ignores the other skids."""
+        scales, times = self.scales, self.times
+        n_act, S, T = len(idx), len(self.scales), len(self.times)
+        body = scene.skids.grown[idx]
+        plain = scene.skids.plain[idx]
+        # A skid already inside its margin of something is judged by its plain footprint, or it
+        # could never move away again.
+        body = np.where(self.within_margin(view, idx, body, scene)[:, None, None], plain, body)
+        # Poses for every (robot, scale, time), from the current velocity towards the command.
+        v_cmd = (raw[:, 0][:, None] * scales[None, :]).ravel()
+        w_cmd = np.repeat(raw[:, 1], S)
+        pose = rollout(view, np.repeat(idx, S), v_cmd, w_cmd, times).reshape(-1, 3)
+        owner = np.repeat(np.arange(n_act), S * T)
+        corners = footprint_corners(pose, np.repeat(body, S * T, axis=0))
+        bad = self._hits_static(view, corners, scene)
+        blockers = self._hits_skids(view, idx, corners, owner, bad, scene, robots)
+        self._hits_people(view, corners, n_act, bad)
+        bad = bad.reshape(n_act, S, T)
+        # The fastest safe scale; if even turning in place collides, stop turning as well.
+        safe = ~bad.any(axis=2)
+        first_safe = np.where(safe.any(axis=1), np.argmax(safe, axis=1), S - 1)
+        out = raw.copy()
+        out[:, 0] *= scales[first_safe]
+        out[~safe[:, -1]] = 0.0
+        slowed = first_safe > 0
+        blockers = [b if s else set() for b, s in zip(blockers, slowed, strict=True)]
+        if joint and robots:
+            self.joint_check(view, idx, out, body)
+        return MonitorResult(out, blockers, slowed)
+
+    @staticmethod
+    def _hits_static(view: ControlView, corners: np.ndarray, scene: Scene) -> np.ndarray:
+        """Which footprints ``corners`` overlap a static solid."""
+        bad = np.zeros(len(corners), dtype=bool)
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        qi, si = scene.static.tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        if len(qi):
+            hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
+            bad[qi[hit]] = True
+        return bad
+
+    def _hits_skids(self, view, idx, corners, owner, bad, scene: Scene, robots: bool):
+        """Mark (in ``bad``) footprints overlapping other skids where they stand; returns per
+        robot row the skids hit at full speed."""
+        S, T = len(self.scales), len(self.times)
+        others = footprint_corners(view.poses, scene.skids.plain)
+        tree = cKDTree(others.mean(axis=1))
+        radius = max(f.circumradius_m for f in view.footprints) * 2 + self.params.margin_m
+        cand = tree.query_ball_point(corners.mean(axis=1), radius)
+        lens = np.fromiter(map(len, cand), int, len(cand))
+        qa = np.repeat(np.arange(len(cand)), lens)
+        qb = np.fromiter(itertools.chain.from_iterable(cand), int, int(lens.sum()))
+        keep = (qb != idx[owner[qa]]) & robots
+        qa, qb = qa[keep], qb[keep]
+        blockers: list[set[int]] = [set() for _ in range(len(idx))]
+        if len(qa):
+            hit = convex_overlap(corners[qa], others[qb]) > TOUCH_TOLERANCE_M
+            bad[qa[hit]] = True
+            full_speed = (qa // T) % S == 0
+            for a, b in zip(owner[qa[hit & full_speed]], qb[hit & full_speed], strict=True):
+                blockers[a].add(int(b))
+        return blockers
+
+    def _hits_people(self, view: ControlView, corners, n_act: int, bad: np.ndarray) -> None:
+        """Mark (in ``bad``) footprints overlapping a person walking on at their velocity."""
+        if not len(view.people_xy):
+            return
+        tt = np.tile(np.repeat(self.times, 1), n_act * len(self.scales))
+        for k in range(len(view.people_xy)):
+            centre = view.people_xy[k] + view.people_vel[k] * tt[:, None]
+            gap = rect_disc_gap(corners, centre, np.full(len(corners), view.people_radius[k]))
+            bad |= gap < 0
+
+    def within_margin(
+        self, view: ControlView, idx: np.ndarray, grown: np.ndarray, scene: Scene
+    ) -> np.ndarray:
+        """Skids whose grown footprint overlaps a static solid or another skid right now."""
+        corners = footprint_corners(view.poses[idx], grown)
+        out = self._hits_static(view, corners, scene)
+        others = footprint_corners(view.poses, scene.skids.plain)
+        ia, ib = np.meshgrid(np.arange(len(idx)), np.arange(len(view.poses)), indexing="ij")
+        ia, ib = ia.ravel(), ib.ravel()
+        near = (
+            np.linalg.norm(view.poses[idx[ia], :2] - view.poses[ib, :2], axis=1)
+            < self.params.neighbour_range_m
+        )
+        near &= idx[ia] != ib
+        ia, ib = ia[near], ib[near]
+        if len(ia):
+            hit = convex_overlap(corners[ia], others[ib]) > TOUCH_TOLERANCE_M
+            out[ia[hit]] = True
+        return out
+
+    def joint_check(
+        self, view: ControlView, idx: np.ndarray, out: np.ndarray, body: np.ndarray
+    ) -> None:
+        """Stop the pairs of skids whose commands, held together, bring them into contact
+        within the horizon (in place on ``out``).
+
+        Each skid's own check treats the others as standing still; two skids turning in
+        place next to each other, each safe alone, can still swing their corners together.
+        ORCA should prevent that, but its guarantee is for one step and holonomic centres.
+        The stopped skids' braking is rolled out again, until no new pair is found.
+        """
+        times = self.times
+        T = len(times)
+        reach = max(f.circumradius_m for f in view.footprints) * 2.0
+        # Two skids closing at their current speed plus their top speed over the horizon.
+        speed = np.abs(view.vel[idx, 0]).max(initial=0.0) + view.max_speed[idx].max()
+        pairs = cKDTree(view.poses[idx, :2]).query_pairs(
+            reach + 2.0 * speed * times[-1], output_type="ndarray"
+        )
+        while len(pairs):
+            pose = rollout(view, idx, out[:, 0], out[:, 1], times)
+            corners = footprint_corners(pose.reshape(-1, 3), np.repeat(body, T, axis=0))
+            corners = corners.reshape(len(idx), T, 4, 2)
+            a = np.repeat(pairs[:, 0], T)
+            b = np.repeat(pairs[:, 1], T)
+            tk = np.tile(np.arange(T), len(pairs))
+            hit = convex_overlap(corners[a, tk], corners[b, tk]) > TOUCH_TOLERANCE_M
+            bad = np.unique(pairs[hit.reshape(len(pairs), T).any(axis=1)])
+            bad = bad[np.any(out[bad] != 0.0, axis=1)]
+            if not len(bad):
+                return
+            out[bad] = 0.0

@@ -1,0 +1,391 @@
+"""Parameters of the navigation components: one frozen, validated object per component.
+
+Every field carries its unit in its name and a comment saying why it has its value; bad values
+raise :class:`ValueError` naming the field and the value (as :class:`~swarmpark.control.orca.
+kernel.OrcaParams` does). :class:`NavParams` composes them and stays the one entry point of the
+supervisor and the scenarios (``NavParams(avoidance="rvo")``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from swarmpark.control.modes import AVOIDANCE_MODES
+from swarmpark.core.progress import NAV_HEADING_LEVER_M
+
+__all__ = [
+    "AVOIDANCE_MODES",
+    "AvoidanceParams",
+    "BackUpParams",
+    "DeadlockParams",
+    "DockingParams",
+    "FieldParams",
+    "FollowerParams",
+    "GiveWayParams",
+    "HoldParams",
+    "MakeRoomParams",
+    "MonitorParams",
+    "NavParams",
+    "PlannerParams",
+    "StallParams",
+]
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
+
+
+#: Validation rules of :func:`_check`: (test, what the message says the value must be).
+_RULES = {
+    ">0": (lambda v: _is_number(v) and np.isfinite(v) and v > 0, "a finite number > 0"),
+    ">=0": (lambda v: _is_number(v) and np.isfinite(v) and v >= 0, "a finite number >= 0"),
+    "int>0": (lambda v: isinstance(v, int | np.integer) and v > 0, "an integer > 0"),
+    "share": (lambda v: _is_number(v) and 0 <= v <= 1, "a number in [0, 1]"),
+}
+
+
+def _check(obj, rules: dict[str, str]) -> None:
+    """Validate ``obj``'s fields by the rules of :data:`_RULES` (ValueError names the field)."""
+    cls = type(obj).__name__
+    for name, rule in rules.items():
+        value = getattr(obj, name)
+        test, what = _RULES[rule]
+        if not test(value):
+            raise ValueError(f"{cls}.{name} must be {what} (got {value!r})")
+
+
+def _order(obj, small: str, large: str) -> None:
+    a, b = getattr(obj, small), getattr(obj, large)
+    if not a < b:
+        cls = type(obj).__name__
+        raise ValueError(f"{cls}.{small} must be below {cls}.{large} (got {a!r} >= {b!r})")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FollowerParams:
+    """Path following (:mod:`.follower`)."""
+
+    #: Lookahead along the path of the field's temporary goal (about two skid lengths).
+    lookahead_m: float = 1.2
+    #: Within this arc length of the path's end the field attracts the goal pose itself.
+    approach_m: float = 2.0
+    #: Switch driving end only if the other end's arc is shorter by this factor (hysteresis).
+    switch_ratio: float = 0.75
+    #: A fresh path is driven in reverse when the skid faces more than this away from its
+    #: first stretch (below it turning in place to drive forwards is cheaper).
+    face_away_rad: float = float(np.deg2rad(120.0))
+
+    def __post_init__(self) -> None:
+        _check(self, {"lookahead_m": ">0", "approach_m": ">0", "switch_ratio": "share"})
+        if not (_is_number(self.face_away_rad) and 0 <= self.face_away_rad <= np.pi):
+            raise ValueError(
+                f"FollowerParams.face_away_rad must be in [0, pi] (got {self.face_away_rad!r})"
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlannerParams:
+    """Path planning (:mod:`.planner`)."""
+
+    #: A failed plan is tried again this often (the way may have cleared).
+    replan_period_s: float = 3.0
+    #: At most this many paths are planned in one tick (a park command for a hundred skids
+    #: must not stall the loop).
+    max_plans_per_tick: int = 8
+    #: Paths are searched on the map coarsened to this resolution (conservatively); None
+    #: searches at the map's own resolution. Coarser plans are faster (see the nav.plan
+    #: benchmark) but narrow the passages by up to a cell, which costs time in tight spaces.
+    plan_resolution_m: float | None = None
+    #: Points checked along the straight run from a staging point to the goal (0.1 m apart
+    #: at the default run-up).
+    staging_check_points: int = 10
+
+    def __post_init__(self) -> None:
+        _check(self, {"replan_period_s": ">0", "max_plans_per_tick": "int>0"})
+        _check(self, {"staging_check_points": "int>0"})
+        if self.plan_resolution_m is not None:
+            _check(self, {"plan_resolution_m": ">0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class FieldParams:
+    """The action-point potential field (:mod:`.field`, 2015 paper Sect. 3.2)."""
+
+    #: The goal force falls linearly inside this distance (2015 paper, extension 3) ...
+    slow_radius_m: float = 1.2
+    #: ... but not below this, so the skid still creeps into its spot.
+    min_goal_speed_mps: float = 0.06
+    #: Heading error counts toward the distance that sets the goal force at this lever.
+    heading_lever_m: float = NAV_HEADING_LEVER_M
+    #: Repulsion gains (force in m/s at 1 m is gain * (1 - 1/influence^3)); people twice a
+    #: skid's, as they move unpredictably.
+    k_static: float = 0.004
+    k_robot: float = 0.004
+    k_person: float = 0.008
+    #: Reach of the repulsion beyond the skid's own reach.
+    influence_m: float = 0.5
+    #: Near its goal a skid ignores obstacles farther than this (parked neighbours sit there).
+    influence_at_goal_m: float = 0.15
+    #: Sampling of obstacle and skid outlines for the field (a tenth of the smallest gap).
+    outline_step_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        _check(self, {"slow_radius_m": ">0", "min_goal_speed_mps": ">0", "heading_lever_m": ">=0"})
+        _check(self, {"k_static": ">=0", "k_robot": ">=0", "k_person": ">=0"})
+        _check(self, {"influence_m": ">0", "influence_at_goal_m": ">0", "outline_step_m": ">0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class DockingParams:
+    """The goal-axis docking manoeuvre (:mod:`.docking`)."""
+
+    #: Within this distance of the goal, align the heading and close the remaining
+    #: distance straight along the goal heading (if the lateral error allows it).
+    dock_radius_m: float = 0.3
+    #: Largest lateral error that can still be closed by driving straight in.
+    dock_lateral_m: float = 0.07
+    #: Gain of the goal-axis tracking law (rad of aim per m of lateral error, via atan).
+    k_lateral: float = 3.0
+    #: Otherwise back out to this run-up distance along the goal heading and come in again;
+    #: the planner also stages the path this far before the goal.
+    runup_m: float = 0.9
+    #: The manoeuvre takes over this close to the goal: room for a full run-up and back.
+    manoeuvre_radius_m: float = 1.8
+    #: A run-up ends once the lateral error is below this (half the docking tolerance) ...
+    runup_done_lateral_m: float = 0.035
+    #: ... or once it has backed this far while held still again.
+    runup_min_back_m: float = 0.2
+    #: Farther off the goal heading than this next to the goal, turn in place first (the
+    #: axis law needs a rough alignment).
+    align_first_rad: float = float(np.deg2rad(75.0))
+    #: A docked skid holds still inside these errors and resumes beyond the outer ones.
+    parked_pos_m: float = 0.03
+    parked_yaw_rad: float = float(np.deg2rad(1.5))
+    resume_pos_m: float = 0.09
+    resume_yaw_rad: float = float(np.deg2rad(4.0))
+    #: Speed per metre of longitudinal error (1/s) and yaw rate per radian of error (1/s).
+    k_dock: float = 1.0
+    k_dock_yaw: float = 1.5
+    #: Docking speed bounds: at least the field's creep speed, at most this share of the
+    #: skid's top speed (a precise manoeuvre).
+    min_speed_mps: float = 0.06
+    max_speed_share: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(self, {"dock_radius_m": ">0", "dock_lateral_m": ">0", "k_lateral": ">0"})
+        _check(self, {"runup_m": ">0", "runup_done_lateral_m": ">0", "runup_min_back_m": ">=0"})
+        _check(self, {"parked_pos_m": ">0", "parked_yaw_rad": ">0", "k_dock": ">0"})
+        _check(self, {"k_dock_yaw": ">0", "min_speed_mps": ">0", "max_speed_share": "share"})
+        _order(self, "parked_pos_m", "resume_pos_m")
+        _order(self, "parked_yaw_rad", "resume_yaw_rad")
+        _order(self, "runup_m", "manoeuvre_radius_m")
+        if not (_is_number(self.align_first_rad) and 0 < self.align_first_rad < np.pi):
+            raise ValueError(
+                f"DockingParams.align_first_rad must be in (0, pi) (got {self.align_first_rad!r})"
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class MonitorParams:
+    """The collision monitor (:mod:`.monitor`, as Navigation2's)."""
+
+    #: Look this far ahead in time (a skid brakes from full speed in about that).
+    horizon_s: float = 1.0
+    #: Rollout samples over the horizon.
+    samples: int = 5
+    #: Fractions of the commanded speed tried, fastest first; the last must be 0 (turn only).
+    scales: tuple[float, ...] = (1.0, 0.6, 0.3, 0.0)
+    #: Extra clearance the monitor keeps (the localization error is about 2 cm).
+    margin_m: float = 0.03
+    #: Skids whose pivots are farther apart than this cannot overlap now (twice the reach of
+    #: a skid whose far corner is 1.5 m from its pivot; the default skid's is 0.72 m).
+    neighbour_range_m: float = 3.0
+
+    def __post_init__(self) -> None:
+        _check(self, {"horizon_s": ">0", "samples": "int>0", "margin_m": ">=0"})
+        _check(self, {"neighbour_range_m": ">0"})
+        s = self.scales
+        numbers = isinstance(s, tuple) and all(_is_number(x) for x in s)
+        if not (numbers and s and s[-1] == 0.0 and s[0] <= 1 and list(s) == sorted(s)[::-1]):
+            raise ValueError(
+                f"MonitorParams.scales must fall from at most 1 to 0 (got {self.scales!r})"
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class StallParams:
+    """When a skid counts as held still (:class:`.recovery.StallWatch`)."""
+
+    #: Held still this long (by the monitor or the field), a recovery starts.
+    time_s: float = 2.0
+    #: Below these commands a skid counts as still.
+    speed_mps: float = 0.02
+    yaw_rate_radps: float = 0.05
+
+    def __post_init__(self) -> None:
+        _check(self, {"time_s": ">0", "speed_mps": ">0", "yaw_rate_radps": ">0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class BackUpParams:
+    """Backing up straight along the axis (Navigation2's back-up; RVO's back-out)."""
+
+    #: Distance backed up (half a skid length: enough to free a corner).
+    distance_m: float = 0.5
+    #: Speed as a share of the skid's top speed (it drives blind over its rear).
+    speed_share: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(self, {"distance_m": ">0", "speed_share": "share"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class GiveWayParams:
+    """Right of way at bottlenecks without RVO (:class:`.recovery.GiveWay`)."""
+
+    #: Held up this long by a skid of higher rank, a skid backs away from it ...
+    after_s: float = 1.0
+    #: ... for at most this long ...
+    duration_s: float = 3.0
+    #: ... or until this far (centre to centre) from it,
+    clear_m: float = 2.5
+    #: at this share of its top speed.
+    speed_share: float = 0.5
+    #: Skids this close to their goal (two docking radii) are docking: they never give way.
+    exempt_within_m: float = 0.6
+
+    def __post_init__(self) -> None:
+        _check(self, {"after_s": ">=0", "duration_s": ">0", "clear_m": ">0"})
+        _check(self, {"speed_share": "share", "exempt_within_m": ">=0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class DeadlockParams:
+    """The RVO deadlock recovery ladder (:class:`.recovery.DeadlockLadder`)."""
+
+    #: Progress means coming this much closer (remaining distance, see core.progress) ...
+    progress_m: float = 0.1
+    #: ... within this long; otherwise the skid is stuck and its priority is bumped.
+    stuck_s: float = 3.0
+    #: The bump: this, plus up to as much again the nearer the goal (nearest goes first).
+    bump: float = 2.0
+    #: Each further ``stuck_s`` the skid side-steps for this long (0: never) ...
+    sidestep_s: float = 2.0
+    #: ... its preferred velocity turned this much to the right of its path.
+    sidestep_rad: float = float(np.pi / 2)
+    #: Heading lever of the remaining distance (core.progress.NAV_HEADING_LEVER_M).
+    heading_lever_m: float = NAV_HEADING_LEVER_M
+
+    def __post_init__(self) -> None:
+        _check(self, {"progress_m": ">0", "stuck_s": ">0", "bump": ">=0"})
+        _check(self, {"sidestep_s": ">=0", "sidestep_rad": ">=0", "heading_lever_m": ">=0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class MakeRoomParams:
+    """Making room with RVO (:mod:`.make_room`)."""
+
+    #: A parked skid in the corridor another skid will sweep (its path from its rear to this
+    #: far ahead) or a walking person will cross (this far along their velocity) moves aside.
+    lookahead_m: float = 4.0
+    #: The corridor is the passing skid's half-width plus this to either side.
+    clearance_m: float = 0.3
+    #: Speed (m/s) per metre still to go while making room ...
+    gain_per_s: float = 1.5
+    #: ... and the ORCA priority meanwhile (above the parked priority, so it pushes
+    #: still-parked neighbours on along their axes).
+    priority: float = 0.5
+    #: Candidate moves along the axis: steps of this up to this far either way.
+    shift_step_m: float = 0.05
+    shift_max_m: float = 2.0
+    #: Aim this much past the first free shift (the speed does not vanish on arrival).
+    overshoot_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        _check(self, {"lookahead_m": ">0", "clearance_m": ">=0", "gain_per_s": ">0"})
+        _check(self, {"priority": ">=0", "shift_step_m": ">0", "overshoot_m": ">=0"})
+        _order(self, "shift_step_m", "shift_max_m")
+
+
+@dataclass(frozen=True, kw_only=True)
+class AvoidanceParams:
+    """The ORCA adapter (:mod:`.avoidance`)."""
+
+    #: Priority of skids holding still on their goal or with no goal: they yield.
+    parked_priority: float = 0.0
+    #: Every skid keeps at least this share of the avoidance (a boxed-in skid cannot yield).
+    min_share: float = 0.1
+    #: A skid on its path aims its effective centre this far ahead on the path (long, so
+    #: that a sidestep does not turn into a pull back onto the path).
+    lookahead_m: float = 3.0
+    #: Keep right: a skid on its path with another skid on the move coming the other way
+    #: within ``keep_right_range_m`` turns its preferred velocity this much clockwise (times
+    #: twice its ORCA share), so crossings resolve as a roundabout instead of stalling in
+    #: symmetric jams (RVO2's examples break the symmetry with noise) ...
+    keep_right_rad: float = 1.0
+    keep_right_max_rad: float = float(np.pi / 2)
+    keep_right_range_m: float = 4.0
+    #: ... fully with static solids at least ``keep_right_open_m`` away, fading out to none
+    #: at ``keep_right_tight_m`` (in a door both keeping right wedge on the jambs).
+    keep_right_open_m: float = 2.5
+    keep_right_tight_m: float = 1.0
+    #: Extra margin around skids on the move (their turns lag the command).
+    margin_m: float = 0.1
+    #: Horizon of the velocity obstacles between skids: avoid this early.
+    horizon_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        _check(self, {"parked_priority": ">=0", "lookahead_m": ">0", "keep_right_rad": ">=0"})
+        _check(self, {"keep_right_max_rad": ">=0", "keep_right_range_m": ">0"})
+        _check(self, {"margin_m": ">=0", "horizon_s": ">0"})
+        if not (_is_number(self.min_share) and 0 <= self.min_share <= 0.5):
+            raise ValueError(
+                f"AvoidanceParams.min_share must be in [0, 0.5] (got {self.min_share!r})"
+            )
+        _order(self, "keep_right_tight_m", "keep_right_open_m")
+
+
+@dataclass(frozen=True, kw_only=True)
+class HoldParams:
+    """Fill order: skids held back wait outside their parking boundary."""
+
+    #: Held skids stop this far outside the boundary (room for the others to pass).
+    gap_m: float = 1.0
+    #: Their command is checked this far ahead in time.
+    lookahead_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(self, {"gap_m": ">=0", "lookahead_s": ">0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class NavParams:
+    """Tuning of the whole navigation stack: the avoidance mode and one object per component."""
+
+    #: Skid-skid avoidance, one of :data:`AVOIDANCE_MODES`.
+    avoidance: str = "monitor"
+    follower: FollowerParams = field(default_factory=FollowerParams)
+    planner: PlannerParams = field(default_factory=PlannerParams)
+    apf: FieldParams = field(default_factory=FieldParams)
+    docking: DockingParams = field(default_factory=DockingParams)
+    monitor: MonitorParams = field(default_factory=MonitorParams)
+    stall: StallParams = field(default_factory=StallParams)
+    backup: BackUpParams = field(default_factory=BackUpParams)
+    give_way: GiveWayParams = field(default_factory=GiveWayParams)
+    deadlock: DeadlockParams = field(default_factory=DeadlockParams)
+    make_room: MakeRoomParams = field(default_factory=MakeRoomParams)
+    rvo: AvoidanceParams = field(default_factory=AvoidanceParams)
+    hold: HoldParams = field(default_factory=HoldParams)
+
+    def __post_init__(self) -> None:
+        if self.avoidance not in AVOIDANCE_MODES:
+            raise ValueError(
+                f"NavParams.avoidance must be one of {list(AVOIDANCE_MODES)} "
+                f"(got {self.avoidance!r})"
+            )
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name != "avoidance" and type(value).__name__ != f.type:
+                raise ValueError(f"NavParams.{f.name} must be a {f.type} (got {value!r})")

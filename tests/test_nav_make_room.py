@@ -1,0 +1,66 @@
+"""Making room on hand-built views: a parked skid in another's corridor moves aside along its
+axis to the nearer free side (not into a wall), keeps that side, and skids out of the way stay."""
+
+import numpy as np
+from navkit import make_view
+
+from swarmpark.control.nav.follower import PathState
+from swarmpark.control.nav.make_room import MakeRoom, RoomState
+from swarmpark.control.nav.params import MakeRoomParams
+from swarmpark.control.nav.scene import Scene
+
+MOVER_PATH = np.array([[1.0, 3.0], [9.0, 3.0]])  # skid 1 drives along y = 3
+
+
+def _room(parked_pose, boxes=(), rooms=None, mover=(1.5, 3.0, 0.0)):
+    view = make_view([parked_pose, mover], [parked_pose, [9.0, 3.0, 0.0]], boxes=boxes)
+    scene = Scene(0.1, 0.03).update(view)
+    paths = [PathState(), PathState(path=MOVER_PATH)]
+    rooms = rooms or [RoomState(), RoomState()]
+    res = MakeRoom(MakeRoomParams()).step(view, np.array([True, False]), paths, rooms, scene)
+    return res, rooms
+
+
+def test_a_parked_skid_in_the_corridor_moves_aside_along_its_axis():
+    res, rooms = _room([5.0, 3.0, np.pi / 2])  # across the way, axis along y
+    assert res.aside[0] and res.undock[0]
+    assert res.speed[0] > 0 and rooms[0].side == 1  # both sides equal: along its heading
+    assert not res.aside[1] and res.speed[1] == 0.0  # the mover itself is not settled
+
+
+def test_it_keeps_the_side_it_chose():
+    rooms = [RoomState(side=-1), RoomState()]
+    res, rooms = _room([5.0, 3.3, np.pi / 2], rooms=rooms)  # now nearer the + side
+    assert res.speed[0] < 0 and rooms[0].side == -1
+
+
+def test_it_does_not_move_into_a_wall():
+    res, rooms = _room([5.0, 3.0, np.pi / 2], boxes=[(4.0, 4.2, 6.0, 6.0)])
+    assert res.speed[0] < 0 and rooms[0].side == -1
+
+
+def test_a_skid_out_of_the_way_stays_and_forgets_its_side():
+    res, rooms = _room([5.0, 5.0, np.pi / 2], rooms=[RoomState(side=1), RoomState()])
+    assert not res.aside[0] and res.speed[0] == 0.0 and not res.undock[0]
+    assert rooms[0].side == 0
+
+
+def test_a_skid_that_stood_aside_waits_while_its_spot_is_in_the_way():
+    # Its goal is on the mover's way, it stands aside at y = 4.5: it waits there (aside)
+    # without moving, and keeps its side.
+    view = make_view(
+        [[5.0, 4.5, np.pi / 2], [1.5, 3.0, 0.0]], [[5.0, 3.0, np.pi / 2], [9.0, 3.0, 0.0]]
+    )
+    scene = Scene(0.1, 0.03).update(view)
+    rooms = [RoomState(side=1), RoomState()]
+    paths = [PathState(), PathState(path=MOVER_PATH)]
+    res = MakeRoom(MakeRoomParams()).step(view, np.array([True, False]), paths, rooms, scene)
+    assert res.aside[0] and res.speed[0] == 0.0 and rooms[0].side == 1
+
+
+def test_nothing_moves_without_movers():
+    view = make_view([[5.0, 3.0, np.pi / 2]])
+    scene = Scene(0.1, 0.03).update(view)
+    rooms = [RoomState(side=1)]
+    res = MakeRoom(MakeRoomParams()).step(view, np.array([True]), [PathState()], rooms, scene)
+    assert not res.aside.any() and rooms[0].side == 0

@@ -1,0 +1,104 @@
+"""The collision monitor on hand-built views: it leaves a free path alone, slows or stops before
+contact with walls, skids and people, and its rollout is the simulator's integration."""
+
+import numpy as np
+import pytest
+from navkit import advance, make_view
+
+from swarmpark.control.nav.monitor import CollisionMonitor, rollout
+from swarmpark.control.nav.params import MonitorParams
+from swarmpark.control.nav.scene import Scene
+from swarmpark.core.geometry import integrate_unicycle
+
+WALL = (4.0, 0.0, 4.3, 6.0)  # across the hall at x = 4 m
+
+
+def _check(view, raw, **kw):
+    scene = Scene(0.1, MonitorParams().margin_m).update(view)
+    mon = CollisionMonitor(MonitorParams())
+    return mon.check(view, np.arange(len(view.poses)), np.asarray(raw, float), scene, **kw)
+
+
+def test_leaves_a_free_path_alone():
+    raw = np.array([[0.5, 0.2]])
+    res = _check(make_view([[2.0, 3.0, 0.0]], vel=raw), raw)
+    assert np.array_equal(res.commands, raw)
+    assert not res.slowed[0] and res.blockers == [set()]
+
+
+def test_slows_before_a_wall_and_stops_short_of_it():
+    # Front at 3.6 m driving at 0.5 m/s: within the 1 s horizon it would reach the wall.
+    raw = np.array([[0.5, 0.0]])
+    res = _check(make_view([[3.0, 3.0, 0.0]], vel=raw, boxes=[WALL]), raw)
+    assert 0 <= res.commands[0, 0] < 0.5 and res.slowed[0]
+
+
+def test_closed_loop_never_touches_the_wall_and_gets_close():
+    raw = np.array([[0.5, 0.0]])
+    view = make_view([[1.0, 3.0, 0.0]], boxes=[WALL])
+    for _ in range(150):
+        cmd = _check(view, raw).commands
+        view = advance(view, cmd)
+        front = view.poses[0, 0] + 0.6
+        assert front <= WALL[0]
+    assert front > WALL[0] - 0.4  # it does not stop needlessly early
+
+
+def test_stops_behind_a_standing_skid_and_names_it():
+    raw = np.array([[0.5, 0.0], [0.0, 0.0]])
+    view = make_view([[3.0, 3.0, 0.0], [4.6, 3.0, 0.0]], vel=raw)
+    res = _check(view, raw)
+    assert res.commands[0, 0] < 0.5
+    assert res.blockers[0] == {1}
+    # Without the other skids in the check it would go on.
+    assert _check(view, raw, robots=False).commands[0, 0] == 0.5
+
+
+def test_stops_for_a_person_walking_into_the_way():
+    raw = np.array([[0.5, 0.0]])
+    # A person 1.2 m to the side of the skid's way 0.9 m ahead, walking across it.
+    view = make_view([[2.0, 3.0, 0.0]], vel=raw, people_xy=[[3.3, 1.8]], people_vel=[[0.0, 1.2]])
+    assert _check(view, raw).commands[0, 0] < 0.5
+    # Walking away from it: no reason to slow.
+    view = make_view([[2.0, 3.0, 0.0]], vel=raw, people_xy=[[3.3, 1.8]], people_vel=[[0.0, -1.2]])
+    assert _check(view, raw).commands[0, 0] == 0.5
+
+
+def test_turning_into_a_wall_in_place_is_stopped_too():
+    # The corner already at the wall: turning in place would sweep it into the wall.
+    view = make_view([[3.3, 3.0, 0.0]], boxes=[WALL])
+    res = _check(view, np.array([[0.0, 1.0]]))
+    assert np.array_equal(res.commands, np.zeros((1, 2)))
+
+
+def test_rollout_is_the_unicycle_integration_at_steady_speed():
+    cmd = np.array([[0.4, 0.7]])
+    view = make_view([[2.0, 3.0, 0.3]], vel=cmd, dt=0.1)
+    times = np.array([0.2, 0.5, 1.0])
+    pred = rollout(view, np.array([0]), cmd[:, 0], cmd[:, 1], times)[0]
+    pose, expected = view.poses.copy(), []
+    for k in range(1, 11):
+        pose = integrate_unicycle(pose, cmd[:, 0], cmd[:, 1], 0.1)
+        if any(abs(k * 0.1 - t) < 1e-9 for t in times):
+            expected.append(pose[0])
+    assert np.allclose(pred, np.array(expected), atol=1e-12)
+
+
+def test_rollout_respects_the_acceleration_limit():
+    view = make_view([[2.0, 3.0, 0.0]], dt=0.1, max_accel=0.5)
+    pred = rollout(view, np.array([0]), np.array([0.5]), np.array([0.0]), np.array([1.0]))[0]
+    # From rest at 0.5 m/s^2, speed 0.05 k after step k: 0.1 * 0.05 * (1 + ... + 10).
+    assert pred[0, 0] == pytest.approx(2.0 + 0.1 * 0.05 * 55)
+
+
+@pytest.mark.parametrize(
+    ("kw", "name"),
+    [
+        ({"scales": (1.0, 0.5)}, "scales"),
+        ({"samples": 0}, "samples"),
+        ({"horizon_s": 0}, "horizon_s"),
+    ],
+)
+def test_monitor_params_name_the_bad_field(kw, name):
+    with pytest.raises(ValueError, match=f"MonitorParams.{name}"):
+        MonitorParams(**kw)

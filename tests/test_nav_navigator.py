@@ -1,0 +1,96 @@
+"""The composed navigator on hand-built views (no scenario): it parks a skid in both avoidance
+modes, its caches follow the scene by value, and its parameters are validated."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from navkit import advance, make_view
+from shapely.geometry import box
+
+from swarmpark.control.nav import AVOIDANCE_MODES, Navigator, NavParams
+from swarmpark.control.nav.hold import hold_outside
+from swarmpark.control.nav.params import DockingParams, HoldParams
+from swarmpark.control.nav.scene import Scene
+from swarmpark.control.orca.kernel import OrcaParams
+from swarmpark.core.geometry import wrap_angle
+
+
+@pytest.mark.parametrize("mode", AVOIDANCE_MODES)
+def test_navigator_parks_one_skid_around_a_box(mode):
+    nav = Navigator(NavParams(avoidance=mode))
+    goal = [8.0, 3.0, np.pi / 2]
+    view = make_view([[1.5, 3.0, 0.0]], [goal], goal_changed=[True], boxes=[(4.0, 2.0, 5.0, 4.0)])
+    first_path = None
+    for _ in range(600):
+        cmd = nav.compute(view)
+        if first_path is None:
+            first_path = nav.paths()[0]
+        if nav.robots[0].dock.docked:
+            break
+        view = advance(view, cmd)
+    p = DockingParams()
+    assert nav.robots[0].dock.docked
+    assert np.linalg.norm(view.poses[0, :2] - goal[:2]) < p.resume_pos_m
+    assert abs(wrap_angle(view.poses[0, 2] - goal[2])) < p.parked_yaw_rad
+    # The path was planned once (display code compares arrays by identity).
+    assert nav.paths()[0] is first_path and len(first_path) >= 2
+    assert nav.recoveries == []
+
+
+def test_inactive_skids_get_zero_commands():
+    nav = Navigator()
+    view = make_view([[1.5, 3.0, 0.0]], [[8.0, 3.0, 0.0]], active=[False])
+    assert np.array_equal(nav.compute(view), np.zeros((1, 2)))
+
+
+def test_orca_params_are_built_once_from_the_nav_params():
+    nav = Navigator(NavParams(avoidance="rvo"))
+    orca = nav.avoidance.orca
+    assert orca == OrcaParams(min_share=nav.params.rvo.min_share, time_horizon_s=5.0)
+    view = make_view([[1.5, 3.0, 0.0]], [[8.0, 3.0, 0.0]], goal_changed=[True])
+    nav.compute(view)
+    nav.compute(advance(view, np.zeros((1, 2))))
+    assert nav.avoidance.orca is orca
+
+
+def test_scene_rebuilds_by_value_not_by_identity():
+    view = make_view([[1.5, 3.0, 0.0]], boxes=[(4.0, 2.0, 5.0, 4.0)])
+    scene = Scene(0.1, 0.03).update(view)
+    static, skids = scene.static, scene.skids
+    # A new array with the same coordinates: nothing is rebuilt.
+    same = make_view([[2.0, 3.0, 0.0]], boxes=[(4.0, 2.0, 5.0, 4.0)])
+    assert scene.update(same).static is static and scene.skids is skids
+    # The same array changed in place: rebuilt.
+    view.static_pieces[0] += 1.0
+    assert scene.update(view).static is not static
+    assert scene.static.points.min(axis=0) == pytest.approx([5.0, 3.0])
+
+
+def test_nav_params_refuse_unknown_modes_and_wrong_components():
+    with pytest.raises(
+        ValueError, match=r"NavParams.avoidance must be one of \['monitor', 'rvo'\]"
+    ):
+        NavParams(avoidance="potential")
+    with pytest.raises(ValueError, match="NavParams.docking"):
+        NavParams(docking=0.3)
+    with pytest.raises(ValueError, match="Navigator.params"):
+        Navigator({"avoidance": "rvo"})
+    with pytest.raises(TypeError):
+        NavParams(lookahead_m=1.0)  # the flat fields are gone: NavParams(follower=...)
+
+
+def test_held_skids_stop_outside_their_boundary_but_may_back_off():
+    # Boundary from x = 5 m; the skid's front is 1.1 m from it.
+    view = make_view([[3.3, 3.0, 0.0]])
+    view = replace(view, hold=np.array([True]), hold_zones=(box(5.0, 0.0, 9.0, 6.0),))
+    towards = np.array([[0.5, 0.0]])
+    hold_outside(view, np.array([0]), towards, HoldParams())
+    assert np.array_equal(towards, np.zeros((1, 2)))
+    away = np.array([[-0.5, 0.0]])
+    hold_outside(view, np.array([0]), away, HoldParams())
+    assert away[0, 0] == -0.5
+    # Not held (fill order lets it go): it drives on.
+    free = np.array([[0.5, 0.0]])
+    hold_outside(replace(view, hold=np.array([False])), np.array([0]), free, HoldParams())
+    assert free[0, 0] == 0.5

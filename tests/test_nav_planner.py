@@ -1,0 +1,65 @@
+"""The planner on hand-built views: paths end with a straight run along the goal's axis, plans
+wait for their turn, and a failed plan is tried again only when due."""
+
+import numpy as np
+import pytest
+from navkit import make_view
+
+from swarmpark.control.nav.follower import PathFollower, PathState
+from swarmpark.control.nav.params import FollowerParams, PlannerParams
+from swarmpark.control.nav.planner import Planner
+
+
+def _planner(**kw):
+    return Planner(PlannerParams(**kw), staging_m=0.9, direct_within_m=1.8)
+
+
+def test_the_path_ends_with_a_run_along_the_goal_axis():
+    view = make_view([[1.5, 3.0, 0.0]], [[8.0, 2.0, np.pi / 2]], boxes=[(4.0, 2.0, 5.0, 4.0)])
+    pl = _planner()
+    path = pl.plan(pl.costmap(view, view.footprints[0]), view.poses[0], view.goals[0])
+    assert path[-1] == pytest.approx([8.0, 2.0])
+    run = path[-1] - path[-2]
+    # The last leg lies on the goal's axis (x = 8), from a staging point 0.9 m off.
+    assert run[0] == pytest.approx(0.0, abs=1e-9)
+    assert abs(run[1]) == pytest.approx(0.9)
+    # Close to the goal the path goes there directly.
+    near = pl.plan(pl.costmap(view, view.footprints[0]), np.array([7.0, 2.0, 0.0]), view.goals[0])
+    assert near[-1] == pytest.approx([8.0, 2.0], abs=0.05)
+    assert len(near) == 2
+
+
+def test_plans_are_bounded_per_tick_and_made_for_the_current_goal():
+    poses = [[1.0, 1.0 + k, 0.0] for k in range(4)]
+    goals = [[8.0, 1.0 + k, 0.0] for k in range(4)]
+    view = make_view(poses, goals, goal_changed=[True] * 4)
+    states = [PathState() for _ in range(4)]
+    pl, fol = _planner(max_plans_per_tick=3), PathFollower(FollowerParams())
+    pl.update(view, states, fol)
+    assert [s.path is not None for s in states] == [True, True, True, False]
+    assert all(states[i].is_for(view.goals[i]) for i in range(3))
+    pl.update(make_view(poses, goals, t=0.1), states, fol)  # the last one's turn
+    assert states[3].path is not None and states[3].planned_t == 0.1
+    first = states[0].path
+    pl.update(make_view(poses, goals, t=10.0), states, fol)  # nothing changed: no replanning
+    assert states[0].path is first
+
+
+def test_an_unreachable_goal_fails_and_is_retried_when_due():
+    # The goal is walled in.
+    walls = [(6.0, 0.0, 6.2, 6.0)]
+    view = make_view([[1.0, 3.0, 0.0]], [[8.0, 3.0, 0.0]], boxes=walls, goal_changed=[True])
+    states, pl, fol = [PathState()], _planner(), PathFollower(FollowerParams())
+    pl.update(view, states, fol)
+    assert states[0].failed and states[0].path is None
+    pl.update(make_view([[1.0, 3.0, 0.0]], [[8.0, 3.0, 0.0]], boxes=walls, t=1.0), states, fol)
+    assert states[0].planned_t == 0.0  # not due yet
+    pl.update(make_view([[1.0, 3.0, 0.0]], [[8.0, 3.0, 0.0]], boxes=walls, t=3.0), states, fol)
+    assert states[0].planned_t == 3.0
+
+
+def test_planner_params_name_the_bad_field():
+    with pytest.raises(ValueError, match="PlannerParams.max_plans_per_tick"):
+        PlannerParams(max_plans_per_tick=0)
+    with pytest.raises(ValueError, match="PlannerParams.plan_resolution_m"):
+        PlannerParams(plan_resolution_m=-0.1)
