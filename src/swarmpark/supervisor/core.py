@@ -148,6 +148,11 @@ class Supervisor(CommandsMixin):
         return self.sensing.localizer if self.sensing is not None else None
 
     @property
+    def lidar_spec(self):
+        """The skids' scanner (``None`` without sensing)."""
+        return self.sensing.lidar_spec if self.sensing is not None else None
+
+    @property
     def costmap(self):
         """Onboard obstacle detection (``None`` without sensing)."""
         return self.sensing.costmap if self.sensing is not None else None
