@@ -228,12 +228,9 @@ def grid_from_walls(
     return grid.with_polygons(walls)
 
 
-def load_map_yaml(path: str | Path) -> OccupancyGrid:
-    """Load a ROS map_server map (YAML + PGM/PNG image), trinary mode.
-
-    Raises :class:`MapError` naming the key and value for a missing file or bad metadata.
-    """
-    path = Path(path)
+def _read_map_meta(path: Path) -> dict:
+    """The map YAML as a mapping, or one :class:`MapError` line (missing, not UTF-8, not YAML,
+    nested too deeply, not a mapping)."""
     if not path.is_file():
         raise MapError(f"map.yaml: file not found: {str(path)!r}")
     try:
@@ -247,6 +244,16 @@ def load_map_yaml(path: str | Path) -> OccupancyGrid:
         raise MapError(f"map.yaml: {str(path)!r} is nested too deeply") from None
     if not isinstance(meta, dict):
         raise MapError(f"map.yaml: {str(path)!r} must be a mapping of map_server keys")
+    return meta
+
+
+def load_map_yaml(path: str | Path) -> OccupancyGrid:
+    """Load a ROS map_server map (YAML + PGM/PNG image), trinary mode.
+
+    Raises :class:`MapError` naming the key and value for a missing file or bad metadata.
+    """
+    path = Path(path)
+    meta = _read_map_meta(path)
     for key in ("image", "resolution", "origin"):
         if key not in meta:
             raise MapError(f"map.yaml: {str(path)!r} has no {key!r} key")
