@@ -22,6 +22,9 @@ def test_scenario_meets_expectations(name):
     world = build_world(load_scenario(ROOT / name))
     r = run_world(world).result
     assert r["expect_met"], r["expect_failures"]
+    if r["time_to_park_s"] is not None and r.get("lower_bound_s"):
+        # The lower bound is a bound: no run may beat it.
+        assert r["time_to_park_s"] >= r["lower_bound_s"], (r["time_to_park_s"], r["lower_bound_s"])
     if world.scenario.expect.success:
         assert r["collisions"] == []
         for rid, s in r["robots"].items():

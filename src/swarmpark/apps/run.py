@@ -138,6 +138,12 @@ def check_expect(result: dict, expect) -> tuple[bool, list[str]]:
         tp = result["time_to_park_s"]
         if tp is None or tp > expect.max_time_to_park_s:
             fails.append(f"time_to_park_s {tp} > {expect.max_time_to_park_s}")
+    if expect.max_time_ratio is not None:
+        tp, lb = result["time_to_park_s"], result.get("lower_bound_s")
+        ratio = None if tp is None or not lb else tp / lb
+        if ratio is None or ratio > expect.max_time_ratio:
+            shown = "none" if ratio is None else f"{ratio:.3f}"
+            fails.append(f"time_to_park_s / lower_bound_s {shown} > {expect.max_time_ratio}")
     loc = result.get("localization") or {}
     if expect.max_mean_localization_error_m is not None:
         e = loc.get("mean_error_m")

@@ -189,6 +189,9 @@ class ExpectSpec(_Model):
     max_collisions: Annotated[int, Field(ge=0)] | None = None
     min_clearance_m: float | None = None
     max_time_to_park_s: PositiveFloat | None = None
+    #: Bound on time_to_park_s / lower_bound_s: a regression guard set a little above what
+    #: the scenario achieves, so a slower park fails its test.
+    max_time_ratio: Annotated[float, Field(ge=1.0)] | None = None
     #: With ``sensing.localization: amcl``: bound on the run's mean localization error.
     max_mean_localization_error_m: PositiveFloat | None = None
     #: With kidnappings: every kidnapped skid is found again within this many seconds.
