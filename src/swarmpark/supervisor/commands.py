@@ -119,6 +119,9 @@ class CommandsMixin:
             raise ValueError(idx)
         if len(set(cmd.robots)) != len(cmd.robots):
             raise ValueError(f"park.robots: robot listed twice in {list(cmd.robots)}")
+        # The order the operator listed the skids in must not matter: lay out and assign in
+        # the fleet's order (robots sorted by id, world.build.robot_order_key).
+        idx = np.sort(idx)
         boundary = as_simple_polygon(cmd.boundary, "park.boundary")
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.info.footprints[i] for i in idx]

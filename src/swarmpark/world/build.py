@@ -8,7 +8,8 @@ walls or overlapping, commands naming unknown robots, kidnaps into walls. Errors
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 
 import numpy as np
 from shapely.geometry import Polygon
@@ -189,6 +190,14 @@ def build_world(scn: Scenario) -> World:
             )
         )
 
+    # The fleet's order is the robots' ids in natural order, whatever order the file lists
+    # them in: every tie later on (assignment, fill order, right of way) is broken by id, so a
+    # reordered robot list gives the same run.
+    if scn.perturb.shuffle:  # a shuffled list must give the same run (the sort below)
+        order = np.random.default_rng([scn.seed, PERTURB_STREAM, 1]).permutation(len(robots))
+        robots = [robots[k] for k in order]
+    robots.sort(key=lambda r: robot_order_key(r.id))
+
     # Obstacles and people.
     statics: list[Polygon] = []
     people: list[Person] = []
@@ -230,10 +239,59 @@ def build_world(scn: Scenario) -> World:
         believed_grid=believed,
     )
     _check_start_poses(world)
+    if scn.perturb.start_m > 0 or scn.perturb.start_deg > 0:
+        world = replace(world, robots=_perturbed_starts(world))
     _check_commands(world)
     _check_kidnaps(world)
     _check_faults(world)
     return world
+
+
+#: A perturbed start that lands in a wall or on another skid is drawn again this many times.
+PERTURB_TRIES = 50
+
+
+def _perturbed_starts(world: World) -> tuple[RobotConfig, ...]:
+    """The robots with their starts moved as ``scenario.perturb`` says, drawn from the
+    scenario's seed in the fleet's order; each start keeps clear of walls, obstacles and the
+    skids already placed."""
+    spec = world.scenario.perturb
+    rng = np.random.default_rng([world.scenario.seed, PERTURB_STREAM])
+    pieces, _ = world.static_convex_pieces()
+    bounds = np.array([spec.start_m, spec.start_m, np.deg2rad(spec.start_deg)])
+    placed: list[np.ndarray] = []  # corners of the skids placed so far
+    out = []
+    for r in world.robots:
+        body = body_corners([r.footprint])
+        for _ in range(PERTURB_TRIES):
+            pose = r.start + rng.uniform(-1.0, 1.0, 3) * bounds
+            corners = footprint_corners(pose[None], body)
+            others = np.concatenate([pieces, *(c[None] for c in placed)]) if placed else pieces
+            gaps = convex_gap(np.repeat(corners, len(others), axis=0), others)
+            if np.all(gaps >= 0):
+                break
+        else:
+            raise ScenarioError(
+                f"perturb: no free start within {spec.start_m} m / {spec.start_deg} deg of "
+                f"robot {r.id!r} after {PERTURB_TRIES} draws"
+            )
+        placed.append(pad_polygons([corners[0]], 4)[0])
+        out.append(replace(r, start=pose))
+    return tuple(out)
+
+
+#: The random stream of the start perturbations (independent of the sensing streams).
+PERTURB_STREAM = 0x7E27
+
+
+def robot_order_key(robot_id: str) -> tuple:
+    """Natural order of robot ids: ``s2`` before ``s10``, then text order.
+
+    >>> sorted(["s10", "b", "s2", "a1"], key=robot_order_key)
+    ['a1', 'b', 's2', 's10']
+    """
+    parts = re.split(r"(\d+)", robot_id)
+    return tuple((0, int(t), "") if t.isdigit() else (1, 0, t) for t in parts if t), robot_id
 
 
 def _check_faults(world: World) -> None:
@@ -273,6 +331,7 @@ def _check_kidnaps(world: World) -> None:
 
 
 def _check_start_poses(world: World) -> None:
+    listed = {r.id: k for k, r in enumerate(world.scenario.robots)}  # index in the file
     fps = [r.footprint for r in world.robots]
     poses = np.stack([r.start for r in world.robots])
     corners = footprint_corners(poses, body_corners(fps))
@@ -285,8 +344,8 @@ def _check_start_poses(world: World) -> None:
             what = owners[hit[0]]
             where = "inside a wall" if what == "wall" else f"inside {what.replace(':', ' ')}"
             raise ScenarioError(
-                f"robots[{i}].pose: robot {r.id!r} starts {where} at "
-                f"{[float(v) for v in world.scenario.robots[i].pose]}"
+                f"robots[{listed[r.id]}].pose: robot {r.id!r} starts {where} at "
+                f"{[float(v) for v in world.scenario.robots[listed[r.id]].pose]}"
             )
     iu, ju = np.triu_indices(n, 1)
     if len(iu):
@@ -294,9 +353,10 @@ def _check_start_poses(world: World) -> None:
         bad = np.flatnonzero(g < 0)
         if len(bad):
             a, b = world.robots[iu[bad[0]]], world.robots[ju[bad[0]]]
+            pa, pb = (world.scenario.robots[listed[r.id]].pose for r in (a, b))
             raise ScenarioError(
-                f"robots[{ju[bad[0]]}].pose: robot {b.id!r} overlaps robot {a.id!r} at start "
-                f"(poses {world.scenario.robots[iu[bad[0]]].pose} and {world.scenario.robots[ju[bad[0]]].pose})"
+                f"robots[{listed[b.id]}].pose: robot {b.id!r} overlaps robot {a.id!r} at start "
+                f"(poses {pa} and {pb})"
             )
     for k, person in enumerate(world.people):
         if person.radius_m <= 0:

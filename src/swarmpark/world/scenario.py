@@ -257,8 +257,23 @@ class FaultSpec(_Model):
         return self
 
 
+class PerturbSpec(_Model):
+    """Perturbations of the start, drawn from the scenario's ``seed`` (for sweeps: the same
+    site from slightly different starts). Each start moves uniformly within ``start_m`` in x
+    and y and ``start_deg`` in heading, redrawn (up to :data:`PERTURB_TRIES` times) while it
+    would start in a wall or on another skid; ``shuffle`` lists the robots in a random order
+    (which must not change the outcome: robots are ordered by id, see world.build)."""
+
+    start_m: Annotated[float, Field(ge=0, le=2.0)] = 0.0
+    start_deg: Annotated[float, Field(ge=0, le=180.0)] = 0.0
+    shuffle: bool = False
+
+
 class Scenario(_Model):
     name: str
+    #: Drives everything random in a run: the sensor noise and odometry drift of onboard
+    #: sensing (``sensing``) and the start perturbations (``perturb``). Without either, the
+    #: run is the same for every seed.
     seed: int = 0
     dt_s: Annotated[float, Field(gt=0, le=0.5)] = 0.05
     duration_s: PositiveFloat = 180.0
@@ -271,6 +286,7 @@ class Scenario(_Model):
     sensing: SensingSpec = SensingSpec()
     #: Faults injected on the simulator's robot link (drops, delays, noise).
     faults: list[FaultSpec] = []
+    perturb: PerturbSpec = PerturbSpec()
     expect: ExpectSpec = ExpectSpec()
 
 
