@@ -208,7 +208,8 @@ def _door_site(ctx: _Ctx, cabin: bool) -> _Site:
         bx = xd + WALL_T + rng.uniform(1.0, room_w - bw - 1.0) if room_w - bw > 2 else xd + WALL_T
         by = float(rng.uniform(WALL_T + 1.0, max(WALL_T + 1.0, h - WALL_T - 1.0 - bh)))
         box = _rect(bx, by, bx + bw, min(by + bh, h - WALL_T))
-    d0 = float(rng.uniform(lo + 0.3, hi - 0.3 - door))
+    # A cabin can be exactly the door plus 0.6 m high: clamp the round-off below zero.
+    d0 = lo + 0.3 + float(rng.uniform(0.0, max(hi - lo - 0.6 - door, 0.0)))
     if d0 > lo:
         walls.append(_rect(xd, lo, xd + WALL_T, d0))
     if d0 + door < hi:
