@@ -198,11 +198,14 @@ def load_spec(path: str | Path) -> Spec:
 
 
 def expand_jobs(sources: list[dict], seeds: list[int], params: dict, duration) -> list[Job]:
-    """The cartesian product sources x seeds x parameter values, with stable job ids."""
+    """The cartesian product seeds x sources x parameter values, with stable job ids.
+
+    Seed-major order: a sweep stopped half way has covered every source and parameter.
+    """
     keys = list(params)
     combos = list(itertools.product(*(params[k] for k in keys))) or [()]
     jobs = []
-    for src, seed, combo in itertools.product(sources, seeds, combos):
+    for seed, src, combo in itertools.product(seeds, sources, combos):
         p = dict(zip(keys, combo, strict=True))
         dur = src["duration_s"] if src["duration_s"] is not None else duration
         ident = json.dumps([src["source"], src["robots"], seed, p, dur], sort_keys=True)
@@ -329,8 +332,10 @@ def _client(scheduler: str | None, workers: int | None):
     if scheduler:
         return Client(scheduler), None
     n = workers or os.cpu_count() or 1
+    # In-process workers talk over inproc://; the dashboard listens on loopback, any free
+    # port (a second sweep on the same machine must not collide on 8787).
     cluster = LocalCluster(
-        processes=False, n_workers=n, threads_per_worker=1, dashboard_address=None
+        processes=False, n_workers=n, threads_per_worker=1, dashboard_address="127.0.0.1:0"
     )
     return Client(cluster), cluster
 
