@@ -154,3 +154,25 @@ def test_a_job_that_fails_and_one_that_hangs_are_rows_with_their_error(tmp_path,
     assert tables["overall"]["errors"].iloc[0] == 2
     rec = json.loads(next((tmp_path / "out" / "records").glob("hang-*.json")).read_text())
     assert rec["result"] is None and rec["error"].startswith("timeout")
+
+
+def test_no_run_rebuilds_the_report_from_records_only(tmp_path, tiny):
+    spec = load_spec(_write(tmp_path / "spec.yaml", {"scenarios": [tiny.name], "seeds": [0, 1]}))
+    out = tmp_path / "out"
+    (out / "records").mkdir(parents=True)
+    job = spec.jobs[0]
+    result = {"success": True, "time_to_park_s": 6.0, "lower_bound_s": 4.0, "collisions": [],
+              "deadlocks": [], "robots": {"a": {"commanded": True, "parked": True}}}  # fmt: skip
+    record = {
+        "job": {**job.__dict__},
+        "error": None,
+        "wall_s": 1.0,
+        "attempts": 1,
+        "result": result,
+    }
+    (out / "records" / f"{job.job_id}.json").write_text(json.dumps(record))
+    rep = run_sweep(spec, out, run=False, progress=False)
+    assert rep["ran"] == 0 and rep["skipped"] == 1 and rep["rows"] == 1
+    df = pd.read_parquet(out / "results.parquet")
+    assert df["time_over_bound"].tolist() == [1.5] and df["parked"].tolist() == [True]
+    assert "| tiny | 1 | 0 | 1.00 |" in (out / "summary.md").read_text()

@@ -316,6 +316,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, help="LocalCluster workers (default: cores)")
     s.add_argument("--retries", type=int, default=0, help="re-run a failed job this many times")
     s.add_argument("--timeout", type=_positive, help="seconds per job (default: spec, 1800)")
+    s.add_argument(
+        "--no-run", action="store_true", help="only rebuild table and summary from the records"
+    )
     s.set_defaults(func=cmd_sweep)
 
     b = sub.add_parser("bench", help="run the timing and quality benchmarks")

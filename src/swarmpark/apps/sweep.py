@@ -349,11 +349,13 @@ def run_sweep(
     retries: int = 0,
     timeout_s: float | None = None,
     progress: bool = True,
+    run: bool = True,
 ) -> dict:
     """Run the jobs of ``spec`` not yet finished in ``out_dir``; return counts and paths.
 
     ``timeout_s`` (per job) wins over the spec's, which wins over :data:`DEFAULT_TIMEOUT_S`;
-    a scenario entry's own ``timeout_s`` wins over all.
+    a scenario entry's own ``timeout_s`` wins over all. ``run=False`` only rewrites the table
+    and summary from the records already there (e.g. of a sweep still running, or stopped).
     """
     from dask.distributed import as_completed
 
@@ -363,7 +365,7 @@ def run_sweep(
     (out / "sites").mkdir(parents=True, exist_ok=True)
     timeout_s = timeout_s or spec.timeout_s or DEFAULT_TIMEOUT_S
     done = finished_jobs(out)
-    todo = [j for j in spec.jobs if j.job_id not in done]
+    todo = [j for j in spec.jobs if j.job_id not in done] if run else []
     t0 = time.perf_counter()
     if todo:
         client, cluster = _client(scheduler, workers)
@@ -375,7 +377,7 @@ def run_sweep(
             if cluster is not None:
                 cluster.close()
     report = write_report(out, [j.job_id for j in spec.jobs], spec.name)
-    report.update({"ran": len(todo), "skipped": len(spec.jobs) - len(todo)})
+    report.update({"ran": len(todo), "skipped": len(done & {j.job_id for j in spec.jobs})})
     report["wall_s"] = round(time.perf_counter() - t0, 2)
     return report
 
@@ -427,7 +429,7 @@ def run_sweep_cli(args) -> int:
     out = Path(args.out) if args.out else Path("sweeps") / "out" / spec.name
     rep = run_sweep(
         spec, out, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
-        timeout_s=args.timeout,
+        timeout_s=args.timeout, run=not args.no_run,
     )  # fmt: skip
     print_summary(rep)
     return 0

@@ -190,6 +190,7 @@ def print_summary(rep: dict) -> None:
     for key, t in rep["tables"].items():
         print(f"\n{key}\n" + markdown(t), end="")
     print(
-        f"\nran {rep['ran']} job(s), skipped {rep['skipped']} finished, {rep['wall_s']} s; "
+        f"\nran {rep['ran']} job(s), skipped {rep['skipped']} finished, {rep['rows']} rows, "
+        f"{rep['wall_s']} s; "
         f"wrote {rep['table']} and {rep['summary']}"
     )
