@@ -83,10 +83,10 @@ def test_mixed_footprints_appear_where_the_kind_allows():
     assert not any("footprint" in r for r in generate("pass-through", 1, robots=6)["robots"])
 
 
-def test_door_is_wider_than_the_widest_skid_plus_two_margins():
+def test_door_is_wider_than_the_widest_skid_plus_two_margins(tmp_path):
     for seed in range(5):
         data = generate("elevator", seed, robots=5)
-        world = build_world(load_scenario(write_scenario(data, f"/tmp/_gen_el_{seed}.yaml")))
+        world = build_world(load_scenario(write_scenario(data, tmp_path / f"el{seed}.yaml")))
         park = world.scenario.commands[0].park
         wmax = max(r.footprint.width_m for r in world.robots)
         # The door is the gap in the wall column at the cabin's west edge.
