@@ -1,0 +1,178 @@
+"""Sweeps: spec checking, a 12-job sweep on a LocalCluster, errors and hangs, resume."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from swarmpark.apps.cli import main
+from swarmpark.apps.sweep import SpecError, load_spec, run_sweep
+from swarmpark.apps.sweep_report import flatten_result, summarize
+
+TINY = {
+    "name": "tiny",
+    "duration_s": 60,
+    "map": {"size_m": [12, 8], "resolution_m": 0.1},
+    "robots": [{"id": "a", "pose": [2, 4, 0]}],
+    "commands": [{"goto": {"robot": "a", "pose": [4, 4, 0]}}],
+    "expect": {"success": True},
+}
+
+
+def _write(path: Path, data) -> Path:
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.fixture
+def tiny(tmp_path) -> Path:
+    return _write(tmp_path / "tiny.yaml", TINY)
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ({"scenario": ["x.yaml"]}, "^scenario: unknown key"),
+        ({"scenarios": ["missing.yaml"]}, "^scenarios\\[0\\]: file not found: 'missing.yaml'"),
+        ({"generate": {"kinds": ["moon"]}}, "^generate.kinds: unknown kind 'moon'"),
+        ({"generate": {"kinds": ["door"], "robots": [1]}}, "^generate.robots: .*got 1"),
+        ({"generate": {"kinds": ["door"]}, "seeds": [-1]}, "^seeds: .*got -1"),
+        (
+            {"generate": {"kinds": ["door"]}, "params": {"navigation.avoidance": ["warp"]}},
+            "^params.navigation.avoidance: bad value 'warp'",
+        ),
+        (
+            {"generate": {"kinds": ["door"]}, "params": {"park.assignment": ["cheapest"]}},
+            "^params.park.assignment: bad value 'cheapest'",
+        ),
+        ({"generate": {"kinds": ["door"]}, "timeout_s": 0}, "^timeout_s: a number > 0 .got 0"),
+        ({}, "^scenarios: give scenario files"),
+    ],
+)
+def test_bad_spec_names_field_and_value(tmp_path, spec, message):
+    with pytest.raises(SpecError, match=message):
+        load_spec(_write(tmp_path / "spec.yaml", spec))
+
+
+def test_bad_spec_exits_2_from_the_cli(tmp_path, capsys):
+    path = _write(tmp_path / "spec.yaml", {"generate": {"kinds": ["door"]}, "seeds": "many"})
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
+    assert "seeds: " in capsys.readouterr().err
+
+
+def test_spec_expands_to_the_product_with_stable_ids(tmp_path, tiny):
+    spec = {
+        "scenarios": [tiny.name],
+        "generate": {"kinds": ["door", "hangar"], "robots": [2, None]},
+        "seeds": {"range": [0, 3]},
+        "params": {"navigation.avoidance": ["monitor", "rvo"], "park.method": ["stacking"]},
+    }
+    a = load_spec(_write(tmp_path / "spec.yaml", spec))
+    assert len(a.jobs) == (1 + 2 * 2) * 3 * 2
+    assert len({j.job_id for j in a.jobs}) == len(a.jobs)
+    assert [j.job_id for j in load_spec(tmp_path / "spec.yaml").jobs] == [j.job_id for j in a.jobs]
+
+
+def test_flatten_keeps_scalars_and_counts_lists():
+    row = flatten_result({"a": 1, "b": {"c": 2.0}, "deadlocks": [1, 2], "robots": {"x": {}}})
+    assert row == {
+        "a": 1,
+        "b.c": 2.0,
+        "deadlocks": "[1, 2]",
+        "n_deadlocks": 2,
+        "robots": '{"x": {}}',
+    }
+
+
+@pytest.mark.slow
+def test_twelve_job_sweep_writes_table_and_summary_and_resumes(tmp_path, tiny):
+    spec_path = _write(
+        tmp_path / "spec.yaml",
+        {
+            "name": "twelve",
+            "scenarios": [tiny.name],
+            "generate": {"kinds": ["door"], "robots": [2]},
+            "seeds": [0, 1, 2],
+            "params": {"navigation.avoidance": ["monitor", "rvo"]},
+            "duration_s": 2,
+            "timeout_s": 120,
+        },
+    )
+    spec = load_spec(spec_path)
+    assert len(spec.jobs) == 12
+    out = tmp_path / "out"
+    rep = run_sweep(spec, out, workers=2, progress=False)
+    assert rep["ran"] == 12 and rep["skipped"] == 0
+    df = pd.read_parquet(out / "results.parquet")
+    assert len(df) == 12 and df["error"].isna().all(), df["error"].tolist()
+    assert set(df["kind"]) == {"tiny", "door"}
+    assert set(df["param.navigation.avoidance"]) == {"monitor", "rvo"}
+    # The overrides reached the runs: seed and duration as asked, the right scenario.
+    assert sorted(df["seed"]) == [0] * 4 + [1] * 4 + [2] * 4
+    assert (df["sim_time_s"] <= 2.0 + 1e-9).all()
+    assert set(df.loc[df["kind"] == "door", "scenario"]) == {f"gen-door-s{s}" for s in range(3)}
+    summary = (out / "summary.md").read_text()
+    assert "## per kind" in summary and "## per param.navigation.avoidance" in summary
+    assert (out / "success.png").stat().st_size > 0
+    # The tiny goto (2 m at 0.5 m/s) does not finish in 2 s: every tiny run is not parked.
+    assert not df.loc[df["kind"] == "tiny", "success"].any()
+
+    # Resume: drop three records; only those three run again.
+    gone = sorted((out / "records").glob("*.json"))[:3]
+    for p in gone:
+        p.unlink()
+    rep2 = run_sweep(spec, out, workers=2, progress=False)
+    assert rep2["ran"] == 3 and rep2["skipped"] == 9
+    assert all(p.is_file() for p in gone)
+    assert len(pd.read_parquet(out / "results.parquet")) == 12
+
+
+@pytest.mark.slow
+def test_a_job_that_fails_and_one_that_hangs_are_rows_with_their_error(tmp_path, tiny):
+    bad = _write(tmp_path / "bad.yaml", {**TINY, "robots": [{"id": "a", "pose": [0.2, 4, 0]}]})
+    hang = _write(tmp_path / "hang.yaml", {**TINY, "commands": [], "duration_s": 1e6})
+    spec_path = _write(
+        tmp_path / "spec.yaml",
+        {
+            "scenarios": [bad.name, {"path": hang.name, "timeout_s": 1}, tiny.name],
+        },
+    )
+    rep = run_sweep(load_spec(spec_path), tmp_path / "out", workers=2, retries=1, progress=False)
+    df = pd.read_parquet(tmp_path / "out" / "results.parquet").set_index("kind")
+    assert rep["rows"] == 3
+    assert (
+        df.loc["bad", "error"].startswith("exit 2:") and "robots[0].pose" in df.loc["bad", "error"]
+    )
+    assert df.loc["hang", "error"] == "timeout after 1 s"
+    assert df.loc["hang", "attempts"] == 2  # retried once
+    assert pd.isna(df.loc["tiny", "error"]) and bool(df.loc["tiny", "success"])
+    tables = summarize(df.reset_index())
+    assert tables["overall"]["errors"].iloc[0] == 2
+    rec = json.loads(next((tmp_path / "out" / "records").glob("hang-*.json")).read_text())
+    assert rec["result"] is None and rec["error"].startswith("timeout")
+
+
+def test_no_run_rebuilds_the_report_from_records_only(tmp_path, tiny):
+    spec = load_spec(_write(tmp_path / "spec.yaml", {"scenarios": [tiny.name], "seeds": [0, 1]}))
+    out = tmp_path / "out"
+    (out / "records").mkdir(parents=True)
+    job = spec.jobs[0]
+    result = {"success": True, "time_to_park_s": 6.0, "lower_bound_s": 4.0, "collisions": [],
+              "deadlocks": [], "robots": {"a": {"commanded": True, "parked": True}}}  # fmt: skip
+    record = {
+        "job": {**job.__dict__},
+        "error": None,
+        "wall_s": 1.0,
+        "attempts": 1,
+        "result": result,
+    }
+    (out / "records" / f"{job.job_id}.json").write_text(json.dumps(record))
+    rep = run_sweep(spec, out, run=False, progress=False)
+    assert rep["ran"] == 0 and rep["skipped"] == 1 and rep["rows"] == 1
+    df = pd.read_parquet(out / "results.parquet")
+    assert df["time_over_bound"].tolist() == [1.5] and df["parked"].tolist() == [True]
+    assert "| tiny | 1 | 0 | 1.00 |" in (out / "summary.md").read_text()
