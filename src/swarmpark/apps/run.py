@@ -47,22 +47,32 @@ def run_world(
     controller=None,
     progress: Callable[[float, float], None] | None = None,
     record_every: int = 1,
+    link=None,
+    health=None,
 ) -> RunOutput:
-    """Run ``world`` until ``duration_s`` or until settled; returns the result and trajectories."""
-    sup = Supervisor(world, controller=controller)
+    """Run ``world`` until ``duration_s`` or until settled; returns the result and trajectories.
+
+    ``link`` is the robots (default: the simulator); over a link with no simulator behind it
+    (ROS 2) the poses recorded are the ones the robots report and collisions are not seen.
+    A link with a ``sync(supervisor)`` method is called after every tick (operator topics,
+    visualization)."""
+    sup = Supervisor(world, controller=controller, link=link, health=health)
     scn = world.scenario
     n_ticks = int(round(scn.duration_s / scn.dt_s))
-    times, poses, people = [0.0], [sup.sim.poses.copy()], [sup.sim.person_positions()]
+    sync = getattr(sup.link, "sync", None)
+    times, poses, people = [0.0], [sup.truth_poses().copy()], [_people(sup)]
     settled_since = None
     last_report = -np.inf
     for k in range(n_ticks):
         t0 = time.perf_counter()
         sup.tick()
         sup.metrics.tick_ms.append((time.perf_counter() - t0) * 1e3)
+        if sync is not None:
+            sync(sup)
         if (k + 1) % record_every == 0:
             times.append(sup.t)
-            poses.append(sup.sim.poses.copy())
-            people.append(sup.sim.person_positions())
+            poses.append(sup.truth_poses().copy())
+            people.append(_people(sup))
         if progress is not None and sup.t - last_report >= 1.0:
             progress(sup.t, scn.duration_s)
             last_report = sup.t
@@ -72,7 +82,7 @@ def run_world(
                 break
         else:
             settled_since = None
-    result = sup.metrics.result(sup.t, sup.sim.poses, sup.goals, sup.has_goal)
+    result = sup.metrics.result(sup.t, sup.truth_poses(), sup.goals, sup.has_goal)
     recoveries = getattr(sup.controller, "recoveries", None)
     if recoveries is not None:
         # Deadlock recoveries the navigator applied (RVO): who, when, what, time to clear
@@ -94,9 +104,16 @@ def run_world(
         result["formation_error"] = [
             {"robots": [sup.ids[i] for i in f.idx], **f.metrics()} for f in sup.formations
         ]
+    if sup.health.events:
+        # Robots lost (stale odometry) or not following their commands, and when.
+        result["link_faults"] = list(sup.health.events)
     result["expect"] = scn.expect.model_dump(exclude_none=True)
     result["expect_met"], result["expect_failures"] = check_expect(result, scn.expect)
     return RunOutput(result, np.asarray(times), np.stack(poses), np.stack(people), sup)
+
+
+def _people(sup) -> np.ndarray:
+    return sup.sim.person_positions() if sup.sim is not None else np.zeros((0, 2))
 
 
 def check_expect(result: dict, expect) -> tuple[bool, list[str]]:
