@@ -76,8 +76,18 @@ def cmd_run(args) -> int:
         world = build_world(load_scenario(args.scenario))
     except ScenarioError as exc:
         return _fail(f"{args.scenario}: {exc}")
+    from swarmpark.links.ros2 import link_from_args
+
     show = sys.stderr.isatty() and not args.quiet
-    out = run_world(world, progress=terminal_progress if show else None)
+    link = None
+    try:
+        link = link_from_args(world, args)  # None: the simulator
+        out = run_world(world, progress=terminal_progress if show else None, link=link)
+    except (ValueError, TimeoutError) as exc:
+        return _fail(f"run --link {args.link}: {exc}")
+    finally:
+        if link is not None:
+            link.close()  # the robots stop
     if show:
         sys.stderr.write("\n")
     if args.out:
@@ -222,6 +232,12 @@ def cmd_compare(args) -> int:
 # ----------------------------------------------------------------------------- main
 
 
+def _add_link_args(p) -> None:
+    from swarmpark.links.ros2 import add_link_args
+
+    add_link_args(p)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="swarmpark", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -231,6 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true", help="print the result as JSON")
     r.add_argument("--out", metavar="DIR", help="write result.json, trajectories.npz, run.png")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_link_args(r)
     r.set_defaults(func=cmd_run)
 
     b = sub.add_parser("bench", help="run the timing and quality benchmarks")

@@ -81,6 +81,9 @@ class Ros2Options:
     connect_timeout_s: float = 20.0
     state_period_s: float = 0.2
     map_frame: str = "map"
+    #: :meth:`Ros2Link.spin` waits out the control period (``False``: the caller paces, as
+    #: the served UI does).
+    paced: bool = True
 
 
 class _Endpoint:
@@ -271,7 +274,7 @@ class Ros2Link:
     def spin(self) -> None:
         """Wait for the end of the control period (real time; no catching up when late)."""
         wait = self._next_tick - self.now()
-        if wait > 0:
+        if wait > 0 and self.opt.paced:
             time.sleep(wait)
         self._next_tick = max(self._next_tick + self.dt, self.now())
         return None
@@ -387,3 +390,40 @@ class Ros2Link:
         self._tf.write(rm.tf_message(tfs))
         self._goals.write(rm.pose_array(stamp, frame, sup.goals[sup.has_goal]))
         self._markers.write(markers(sup, stamp, frame))
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def add_link_args(p) -> None:
+    """``--link`` and the ROS 2 options of ``swarmpark run`` / ``swarmpark serve``."""
+    p.add_argument(
+        "--link", choices=("sim", "ros2"), default="sim", help="the robots: simulator or ROS 2"
+    )
+    p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (ros2 link)")
+    p.add_argument(
+        "--loopback", action="store_true", help="ros2 link: DDS on 127.0.0.1 only (one machine)"
+    )
+    p.add_argument("--cmd-stamped", action="store_true", help="ros2 link: TwistStamped cmd_vel")
+    p.add_argument("--amcl-pose", action="store_true", help="ros2 link: robots report amcl_pose")
+
+
+def link_from_args(world: World, args, *, paced: bool = True):
+    """The link ``args`` ask for (``None``: the simulator)."""
+    import os
+
+    if getattr(args, "link", "sim") != "ros2":
+        return None
+    domain = args.domain_id
+    if domain is None:
+        domain = int(os.environ.get("ROS_DOMAIN_ID", "0") or 0)
+    if not 0 <= domain <= 232:
+        raise ValueError(f"--domain-id must be 0..232 (got {domain})")
+    opts = Ros2Options(
+        domain_id=domain,
+        loopback=args.loopback,
+        cmd_stamped=args.cmd_stamped,
+        amcl_pose=args.amcl_pose,
+        paced=paced,
+    )
+    return Ros2Link(world, opts)
