@@ -36,7 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["main", "FakeFleet"]
+__all__ = ["main", "FakeFleet", "STOP_DECEL_FACTOR"]
+
+#: Braking on a dead-man or e-stop stop, as a multiple of the skid's acceleration limits.
+STOP_DECEL_FACTOR = 3.0
 
 
 class FakeFleet:
@@ -81,6 +84,7 @@ class FakeFleet:
         self.collisions: set[tuple[str, str]] = set()
         self._driving = np.zeros(n, dtype=bool)
         self._dropping = np.zeros(n, dtype=bool)
+        self._moving = np.zeros(n, dtype=bool)
         self.Odometry, self.LaserScan = Odometry, LaserScan
 
         rclpy.init()
@@ -143,11 +147,15 @@ class FakeFleet:
             if self._driving[i] and not fresh[i]:
                 self._event("deadman", self.ids[i])
             self._driving[i] = driving
-        target = np.where((fresh & (not self.estop))[:, None], self.cmd, 0.0)
-        target = np.clip(
-            target, -np.stack([self.vmax, self.wmax], 1), np.stack([self.vmax, self.wmax], 1)
-        )
-        self.vel += np.clip(target - self.vel, -self.acc * dt, self.acc * dt)
+        go = fresh & (not self.estop)
+        lim = np.stack([self.vmax, self.wmax], 1)
+        target = np.clip(np.where(go[:, None], self.cmd, 0.0), -lim, lim)
+        # A dead-man or e-stop stop brakes at STOP_DECEL_FACTOR times the normal limits.
+        acc = self.acc * np.where(go, 1.0, STOP_DECEL_FACTOR)[:, None]
+        self.vel += np.clip(target - self.vel, -acc * dt, acc * dt)
+        for i in np.flatnonzero(~go & self._moving & np.all(self.vel == 0, 1)):
+            self._event("standstill", self.ids[i])
+        self._moving = np.any(self.vel != 0, 1)
         self.poses = integrate_unicycle(self.poses, self.vel[:, 0], self.vel[:, 1], dt)
         self._check_collisions()
 
@@ -254,7 +262,7 @@ def _args(argv):
     )
     p.add_argument("--scenario", required=True, help="scenario YAML (map, robots, limits)")
     p.add_argument("--robots", type=int, default=None, help="use the first N robots (default all)")
-    p.add_argument("--rate", type=float, default=50.0, help="integration and odometry rate (Hz)")
+    p.add_argument("--rate", type=float, default=25.0, help="integration and odometry rate (Hz)")
     p.add_argument("--scan-hz", type=float, default=5.0, help="LIDAR rate (Hz, 0: none)")
     p.add_argument(
         "--deadman", type=float, default=0.5, help="stop after this long without cmd_vel (s)"
@@ -297,6 +305,9 @@ def main(argv: list[str] | None = None) -> int:
             now = time.monotonic()
             if now < next_tick:
                 continue
+            # Behind schedule spin_once would take one message per period: drain the queue.
+            for _ in range(4 * n + 4):
+                rclpy.spin_once(fleet.node, timeout_sec=0.0)
             fleet.step(min(now - last, 5 * period))  # a stalled process does not teleport
             last, k = now, k + 1
             next_tick = max(next_tick + period, now)

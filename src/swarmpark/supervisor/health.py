@@ -21,7 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Health", "HealthParams"]
+__all__ = ["Health", "HealthParams", "FOLLOW_GAP_PERIODS"]
+
+#: A check later than this many control periods after the previous one restarts the
+#: command-following window.
+FOLLOW_GAP_PERIODS = 4
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,11 @@ class Health:
         """Compare the measured ``vel`` with the response to the commands ``sent`` last period,
         for robots in ``watch`` (others restart from their measured velocity); returns the
         robots found not following just now."""
+        if self._err and t - self._err[-1][0] > FOLLOW_GAP_PERIODS * dt:
+            # The supervisor itself was late: the robots' dead-men may have stopped them.
+            # Judge only what follows.
+            self._err.clear()
+            watch = np.zeros_like(watch)
         step = np.stack([self._amax, self._alpha], 1) * dt
         self._ideal = np.where(
             watch[:, None], self._ideal + np.clip(sent - self._ideal, -step, step), vel
