@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -106,3 +107,47 @@ def test_a_robot_silent_for_3_s_is_stopped_flagged_and_rejoins(tmp_path):
     # And s3 finished: every skid parked, no collision.
     assert r["success"], r
     assert fleet["collisions"] == []
+
+
+def test_robots_stop_when_the_supervisor_dies_and_obey_a_latched_estop(tmp_path):
+    """The robot-side dead-man stops skids a dead supervisor leaves driving; an e-stop on the
+    latched topic stops every skid whoever sent it, and a supervisor that (re)connects
+    hears it."""
+    from cyclonedds.domain import DomainParticipant
+
+    from swarmpark.links import ros2_msgs as rm
+    from swarmpark.links.ros2 import _Endpoint
+    from swarmpark.supervisor.core import Supervisor
+
+    world = build_world(load_scenario(SCENARIO))
+    domain = _domain()
+    with fake_fleet(tmp_path, domain) as report:
+        link = Ros2Link(world, Ros2Options(domain_id=domain, loopback=True, connect_timeout_s=30))
+        try:
+            sup = Supervisor(world, link=link)
+            for _ in range(60):  # 3 s of driving (ticks: the first one plans, for a while)
+                sup.tick()
+                link.sync(sup)
+            died = time.time()  # the supervisor stops ticking: no more cmd_vel
+            time.sleep(1.5)
+            operator = DomainParticipant(domain)
+            estop = _Endpoint(operator, "/swarmpark/estop", "std_msgs/msg/Bool", "latched", True)
+            estop.write(rm.msg("std_msgs/msg/Bool")(data=True))
+            time.sleep(0.5)
+            sup.inbox.absorb(link.receive())  # what piled up while it was dead
+            before = sup.inbox.pose.copy()
+            t_back = sup.t
+            while sup.t < t_back + 2.0:  # back, and commanding again
+                sup.tick()
+                link.sync(sup)
+            assert sup.estopped  # heard on the latched topic
+            after = sup.inbox.pose.copy()
+        finally:
+            link.close()
+        time.sleep(1.2)  # the fleet's report is refreshed every second
+        fleet = json.loads(report.read_text())
+    deadman = [e for e in fleet["events"] if e["kind"] == "deadman" and e["t"] > died - 0.2]
+    assert len({e["robot"] for e in deadman}) >= 4  # every skid that was driving
+    assert all(0.4 <= e["t"] - died <= 0.65 for e in deadman), [e["t"] - died for e in deadman]
+    assert any(e["kind"] == "estop" for e in fleet["events"])
+    np.testing.assert_allclose(after[:, :2], before[:, :2], atol=0.01)  # nobody moved

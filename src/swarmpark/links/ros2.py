@@ -89,7 +89,16 @@ class Ros2Options:
 class _Endpoint:
     """One DDS reader or writer of raw CDR samples of a ROS 2 type."""
 
-    def __init__(self, participant, topic: str, typename: str, profile: str, write: bool):
+    def __init__(
+        self,
+        participant,
+        topic: str,
+        typename: str,
+        profile: str,
+        write: bool,
+        *,
+        ignore_local: bool = False,
+    ):
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
@@ -97,6 +106,10 @@ class _Endpoint:
         self.typename = typename
         self.topic = Topic(participant, "rt" + topic, rm.dds_type(typename))
         q = qos(profile)
+        if ignore_local:
+            from cyclonedds.qos import Policy, Qos
+
+            q = Qos(*q, Policy.IgnoreLocal.Participant)
         self.entity = (
             DataWriter(participant, self.topic, qos=q)
             if write
@@ -151,6 +164,7 @@ class Ros2Link:
         self._last_state = -math.inf
         self._operator: list[dict] = []
         self.estop_heard: bool | None = None
+        self._estop_published: bool | None = None
         self.received = 0
         self._participant = None
 
@@ -193,7 +207,10 @@ class Ros2Link:
             dp, "/swarmpark/markers", "visualization_msgs/msg/MarkerArray", "default", True
         )
         self._estop_out = _Endpoint(dp, "/swarmpark/estop", "std_msgs/msg/Bool", "latched", True)
-        self._estop_in = _Endpoint(dp, "/swarmpark/estop", "std_msgs/msg/Bool", "latched", False)
+        # (its own e-stop samples are not news: the reader ignores this participant's)
+        self._estop_in = _Endpoint(
+            dp, "/swarmpark/estop", "std_msgs/msg/Bool", "latched", False, ignore_local=True
+        )
         self._command_in = _Endpoint(
             dp, "/swarmpark/command", "std_msgs/msg/String", "default", False
         )
@@ -231,22 +248,36 @@ class Ros2Link:
         deadline = time.monotonic() + self.opt.connect_timeout_s
         while time.monotonic() < deadline:
             self._pending += self._take()
-            if np.all(np.isfinite(self._map_T_odom[:, 0])):
+            if not self._missing():
                 break
             time.sleep(0.02)
         else:
-            missing = [
-                r
-                for r, ok in zip(self.ids, np.isfinite(self._map_T_odom[:, 0]), strict=True)
-                if not ok
-            ]
+            missing = self._missing()
             self.close()
             raise TimeoutError(
-                f"ros2: no odometry from {missing} within {self.opt.connect_timeout_s} s "
-                f"(domain {self.opt.domain_id}; topics /<id>/odom)"
+                f"ros2: within {self.opt.connect_timeout_s} s: {'; '.join(missing)} "
+                f"(domain {self.opt.domain_id})"
             )
         self._next_tick = self.now() + self.dt
         return info
+
+    def _missing(self) -> list[str]:
+        """What connect still waits for: each robot's first odometry, and a subscriber on
+        its ``cmd_vel`` (a command written before DDS matched one would be lost)."""
+        out = []
+        no_odom = [
+            r for r, ok in zip(self.ids, np.isfinite(self._map_T_odom[:, 0]), strict=True) if not ok
+        ]
+        if no_odom:
+            out.append(f"no odometry from {no_odom} on /<id>/odom")
+        deaf = [
+            r
+            for r, w in zip(self.ids, self._cmd, strict=True)
+            if not w.entity.get_matched_subscriptions()
+        ]
+        if deaf:
+            out.append(f"no subscriber on /<id>/cmd_vel of {deaf}")
+        return out
 
     def now(self) -> float:
         return time.time() - self.t0
@@ -346,6 +377,7 @@ class Ros2Link:
     def publish_estop(self, on: bool) -> None:
         """Latch ``/swarmpark/estop``: robots that listen stop (and late joiners hear it)."""
         self._estop_out.write(rm.msg("std_msgs/msg/Bool")(data=bool(on)))
+        self._estop_published = bool(on)
 
     def _publish_map(self) -> None:
         g = self.world.grid
@@ -373,9 +405,8 @@ class Ros2Link:
                 sup.execute(CommandSpec.model_validate(d))
             except ValueError as exc:  # pydantic's ValidationError is a ValueError
                 sup._refuse("operator", f"/swarmpark/command: {exc}".splitlines()[0])
-        if sup.estopped and self.estop_heard is not True:
-            self.publish_estop(True)
-            self.estop_heard = True
+        if sup.estopped != self._estop_published:
+            self.publish_estop(sup.estopped)  # mirrored, latched: late joiners hear it too
         t = self.now()
         if t - self._last_state < self.opt.state_period_s:
             return

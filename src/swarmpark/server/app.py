@@ -106,6 +106,7 @@ def create_app(
     speed: float = 1.0,
     autostart: bool = True,
     scripted: bool = True,
+    link_factory=None,
 ) -> FastAPI:
     """Build the operator-interface app for one scenario.
 
@@ -124,6 +125,9 @@ def create_app(
         Run the simulation as soon as the server starts; ``False`` starts it paused.
     scripted
         Run the scenario's own timed commands.
+    link_factory
+        Builds the robots' link for a world (``None``: the simulator; ROS 2: see
+        :func:`swarmpark.links.ros2.link_from_args`).
 
     Raises
     ------
@@ -134,7 +138,9 @@ def create_app(
     path = Path(scenario_path) if scenario_path is not None else default_scenario(sdir)
     if token is not None and not token.strip():
         raise ValueError("token: must not be empty")
-    session = Session(path, speed=speed, running=autostart, scripted=scripted)
+    session = Session(
+        path, speed=speed, running=autostart, scripted=scripted, link_factory=link_factory
+    )
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):

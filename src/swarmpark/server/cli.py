@@ -52,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-script", action="store_true", help="ignore the scenario's own timed commands"
     )
+    from swarmpark.links.ros2 import add_link_args
+
+    add_link_args(p)
     return p
 
 
@@ -89,8 +92,18 @@ def serve_command(argv: list[str]) -> int:
         except SystemExit as exc:  # -h / --help printed the usage
             return int(exc.code or 0)
         _check(args)
+        factory = None
+        if args.link == "ros2":
+            if args.speed != 1.0:
+                raise _BadInput("swarmpark serve: error: --link ros2 runs in real time (--speed 1)")
+            from swarmpark.links.ros2 import link_from_args
+
+            def factory(world):
+                return link_from_args(world, args, paced=False)  # the session paces
+
         app = create_app(
             args.scenario,
+            link_factory=factory,
             token=args.token,
             scenarios_dir=args.scenarios_dir,
             speed=args.speed,

@@ -97,7 +97,11 @@ class Session:
         running: bool = True,
         scripted: bool = True,
         clock: Callable[[], float] = time.monotonic,
+        link_factory: Callable[[World], object] | None = None,
     ) -> None:
+        #: Builds the robots' link for a world (``None``: the simulator); e.g. ROS 2.
+        self.link_factory = link_factory
+        self.sup: Supervisor | None = None
         self.speed = float(speed)
         self.clock = clock
         self.paused = not running
@@ -138,7 +142,13 @@ class Session:
         self._start(self.world)
 
     def _start(self, world: World) -> None:
-        self.sup = Supervisor(world)
+        old = getattr(self.sup, "link", None)
+        if old is not None and hasattr(old, "close"):
+            old.close()  # the robots of a real link stop
+        link = self.link_factory(world) if self.link_factory is not None else None
+        self.sup = Supervisor(world, link=link)
+        self._ticks = 0
+        self._sync = getattr(self.sup.link, "sync", None)
         self.encoder = FrameEncoder(self.sup)
         self.rev += 1
         self.error = None
@@ -174,7 +184,7 @@ class Session:
             "t_s": round(self.sup.t, 3),
             "paused": self.paused,
             "speed": self.speed,
-            "ticks": self.sup.sim.tick,
+            "ticks": self._ticks,
             "error": self.error,
         }
 
@@ -214,6 +224,9 @@ class Session:
         self._keep_teleop_alive()
         t0, c0 = time.perf_counter(), time.process_time()
         self.sup.tick()
+        self._ticks += 1
+        if self._sync is not None:
+            self._sync(self.sup)  # a real link's operator topics and visualization
         ms = (time.perf_counter() - t0) * 1e3
         self.tick_ms.append(ms)
         self._tick_wall_ms += ms
@@ -239,7 +252,7 @@ class Session:
         if self.paused or self.error:
             self._budget_s = 0.0
             return 0
-        dt = self.sup.sim.dt
+        dt = self.sup.info.dt_s
         self._budget_s += wall_elapsed_s * self.speed
         n = min(int((self._budget_s + 1e-9) // dt), MAX_TICKS_PER_FRAME)
         self._budget_s -= n * dt
@@ -249,7 +262,7 @@ class Session:
 
     def _carry(self, ticks: int, max_wall_s: float) -> None:
         """Put ``ticks`` back into the budget, keeping at most ``max_wall_s`` of backlog."""
-        dt = self.sup.sim.dt
+        dt = self.sup.info.dt_s
         self._budget_s = min(self._budget_s + ticks * dt, max(max_wall_s * self.speed, dt))
 
     def advance(self, wall_elapsed_s: float) -> int:
@@ -312,7 +325,7 @@ class Session:
             "frames": len(rows),
             "ticks": ticks,
             "clients": len(self.clients),
-            "robots": self.sup.sim.n,
+            "robots": self.sup.n,
             "cpu_ms_per_tick": round(sum(cpu) / ticks, 3) if ticks else None,
             "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 3) if cpu else None,
             "cpu_ms_per_frame_p99": round(float(np.percentile(cpu, 99)), 3) if cpu else None,
@@ -325,7 +338,7 @@ class Session:
             "frames_sent": self.frames_sent,
             "frames_paced": self.frames_paced,
             "sim_t_s": round(self.sup.t, 3),
-            "ticks_total": self.sup.sim.tick,
+            "ticks_total": self._ticks,
             "monotonic_s": round(time.monotonic(), 4),
         }
 
