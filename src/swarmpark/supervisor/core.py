@@ -342,7 +342,9 @@ class Supervisor(CommandsMixin):
         stops it if those do not arrive either)."""
         h = self.health
         h.heartbeat(self.t, self.inbox.odom_stamp)
-        watch = ~h.lost & ~self.stopped & (not self.estopped)
+        # A robot that reports itself blocked (in contact) says why it does not follow.
+        blocked = np.array([st == "blocked" for st in self.inbox.status], dtype=bool)
+        watch = ~h.lost & ~self.stopped & (not self.estopped) & ~blocked
         bad = h.follow(self.t, self.info.dt_s, self._sent, self.inbox.vel, watch)
         if bad.any():
             self.stopped[bad] = True

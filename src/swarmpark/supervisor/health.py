@@ -10,7 +10,8 @@ A robot **does not follow** its commands when its measured velocity stays far fr
 robot within its acceleration limits would have reached under the commands sent to it: the
 normalized error ``|v - v*| / v_max + |w - w*| / w_max`` averaged over
 :attr:`HealthParams.follow_window_s` exceeds :attr:`HealthParams.follow_tol`. It is flagged
-and stopped (like an operator ``stop``; ``resume`` releases it).
+and stopped (like an operator ``stop``; ``resume`` releases it). A robot whose status says
+it is ``blocked`` (in contact: the simulator's link reports it) is not judged.
 
 Both are recorded as events (robot, kind, from, to) for the run result and the UI.
 """
