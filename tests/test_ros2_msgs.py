@@ -207,3 +207,49 @@ def test_pose_composition_round_trips():
 def test_unknown_type_is_refused_by_name():
     with pytest.raises(ValueError, match="no_msgs/msg/Nope"):
         rm.msg("no_msgs/msg/Nope")
+
+
+def _world():
+    from pathlib import Path
+
+    from swarmpark.world.scenario import build_world, load_scenario
+
+    return build_world(load_scenario(Path(__file__).parent / "data" / "ros2-open.yaml"))
+
+
+def test_odometry_is_placed_in_the_map_from_the_start_pose():
+    """No DDS: the link's conversion of a robot's odometry (its odom frame starts wherever
+    the base booted) into the map pose the supervisor decides from."""
+    from swarmpark.links.base import Odometry, PoseReport
+    from swarmpark.links.ros2 import Ros2Link
+
+    world = _world()
+    link = Ros2Link(world)
+    link._start = np.stack([r.start for r in world.robots])
+    link.t0 = 100.0
+    odom0 = (5.0, -1.0, 1.0)  # the first report: the robot stands at its start pose
+    m = rm.odometry(101.5, "s2/odom", "s2/base_link", odom0, (0.0, 0.0))
+    first = link._from_odom(1, "s2", m)
+    assert isinstance(first[0], Odometry) and first[0].stamp == pytest.approx(1.5)
+    assert isinstance(first[1], PoseReport)
+    np.testing.assert_allclose(first[1].pose, world.robots[1].start, atol=1e-12)
+    # 1 m forward in the odom frame (heading 1 rad there) is 1 m along the start heading.
+    ahead = rm.compose(odom0, (1.0, 0.0, 0.0))
+    m = rm.odometry(102.0, "s2/odom", "s2/base_link", ahead, (0.5, 0.0))
+    later = link._from_odom(1, "s2", m)
+    x, y, yaw = world.robots[1].start
+    np.testing.assert_allclose(later[1].pose, (x + np.cos(yaw), y + np.sin(yaw), yaw), atol=1e-9)
+    np.testing.assert_allclose(later[0].vel, (0.5, 0.0))
+
+
+def test_link_options_are_checked_by_name():
+    import argparse
+
+    from swarmpark.links.ros2 import link_from_args
+
+    args = argparse.Namespace(
+        link="ros2", domain_id=500, loopback=True, cmd_stamped=False, amcl_pose=False
+    )
+    with pytest.raises(ValueError, match="--domain-id must be 0..232 \\(got 500\\)"):
+        link_from_args(_world(), args)
+    assert link_from_args(_world(), argparse.Namespace(link="sim")) is None

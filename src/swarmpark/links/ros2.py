@@ -283,8 +283,8 @@ class Ros2Link:
         return time.time() - self.t0
 
     def receive(self) -> list[Message]:
-        out, self._pending = self._pending + self._take(), []
-        return out
+        pending, self._pending = self._pending, []
+        return pending + self._take()
 
     def send(self, commands: list[VelocityCommand]) -> None:
         for c in commands:
@@ -320,8 +320,7 @@ class Ros2Link:
             for m in self._scan[i].take():
                 out.append(Scan(rid, rm.stamp_of(m) - self.t0, rm.scan_ranges(m), self._next_seq()))
             if self._amcl:
-                for m in self._amcl[i].take():
-                    self._from_amcl(i, m)
+                out += [self._from_amcl(i, m) for m in self._amcl[i].take()]
         self.received += len(out)
         for m in self._estop_in.take():
             self.estop_heard = bool(m.data)
@@ -352,13 +351,11 @@ class Ros2Link:
             out.append(PoseReport(rid, stamp, rm.compose(self._map_T_odom[i], pose), seq))
         return out
 
-    def _from_amcl(self, i: int, m) -> None:
+    def _from_amcl(self, i: int, m) -> PoseReport:
         pose = rm.pose_of(m.pose.pose)
         if np.isfinite(self._odom_pose[i, 0]):
             self._map_T_odom[i] = rm.compose(pose, rm.inverse(self._odom_pose[i]))
-        self._pending.append(
-            PoseReport(self.ids[i], rm.stamp_of(m) - self.t0, pose, self._next_seq())
-        )
+        return PoseReport(self.ids[i], rm.stamp_of(m) - self.t0, pose, self._next_seq())
 
     # ------------------------------------------------------------------ robots out
 
