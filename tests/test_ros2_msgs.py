@@ -253,3 +253,19 @@ def test_link_options_are_checked_by_name():
     with pytest.raises(ValueError, match="--domain-id must be 0..232 \\(got 500\\)"):
         link_from_args(_world(), args)
     assert link_from_args(_world(), argparse.Namespace(link="sim")) is None
+
+
+def test_duplicated_and_reordered_ros_messages_are_ignored_by_stamp():
+    from swarmpark.links.base import Inbox
+    from swarmpark.links.ros2 import Ros2Link
+
+    world = _world()
+    link = Ros2Link(world)
+    link._start = np.stack([r.start for r in world.robots])
+    inbox = Inbox(tuple(world.ids))
+    new = rm.odometry(2.0, "s1/odom", "s1/base_link", (1.0, 0, 0), (0.2, 0))
+    old = rm.odometry(1.0, "s1/odom", "s1/base_link", (0.5, 0, 0), (0.1, 0))
+    for m in (new, new, old):  # a duplicate, then a late one
+        inbox.absorb(link._from_odom(0, "s1", m))
+    assert inbox.ignored == 4  # (odometry and the pose derived from it) x 2
+    assert inbox.odom[0, 0] == 1.0 and inbox.odom_stamp[0] == 2.0

@@ -47,6 +47,10 @@ from swarmpark.world.scenario import World
 
 __all__ = ["Ros2Link", "Ros2Options", "TOPICS"]
 
+#: ROS 2 messages carry no sender counter: they are ordered by header stamp alone, so a
+#: duplicate (same stamp) is ignored by the inbox like an older message.
+_SEQ = 0
+
 #: topic -> (ROS type, QoS profile, direction) as seen from swarmpark; ``{id}`` is a robot.
 TOPICS = {
     "/{id}/odom": ("nav_msgs/msg/Odometry", "state", "in"),
@@ -160,7 +164,6 @@ class Ros2Link:
         self._next_tick = 0.0
         self._map_T_odom = np.full((n, 3), np.nan)
         self._odom_pose = np.full((n, 3), np.nan)
-        self._seq = 0
         self._last_state = -math.inf
         self._operator: list[dict] = []
         self.estop_heard: bool | None = None
@@ -318,7 +321,7 @@ class Ros2Link:
             for m in self._odom[i].take():
                 out += self._from_odom(i, rid, m)
             for m in self._scan[i].take():
-                out.append(Scan(rid, rm.stamp_of(m) - self.t0, rm.scan_ranges(m), self._next_seq()))
+                out.append(Scan(rid, rm.stamp_of(m) - self.t0, rm.scan_ranges(m), _SEQ))
             if self._amcl:
                 out += [self._from_amcl(i, m) for m in self._amcl[i].take()]
         self.received += len(out)
@@ -333,10 +336,6 @@ class Ros2Link:
             self._operator.append(cmd)
         return out
 
-    def _next_seq(self) -> int:
-        self._seq += 1
-        return self._seq
-
     def _from_odom(self, i: int, rid: str, m) -> list[Message]:
         stamp = rm.stamp_of(m) - self.t0
         pose = rm.pose_of(m.pose.pose)
@@ -345,7 +344,7 @@ class Ros2Link:
             # The first odometry: the robot stands at its declared start pose.
             self._map_T_odom[i] = rm.compose(self._start[i], rm.inverse(pose))
         self._odom_pose[i] = pose
-        seq = self._next_seq()
+        seq = _SEQ
         out: list[Message] = [Odometry(rid, stamp, pose, vel, seq)]
         if not self.opt.amcl_pose:
             out.append(PoseReport(rid, stamp, rm.compose(self._map_T_odom[i], pose), seq))
@@ -355,7 +354,7 @@ class Ros2Link:
         pose = rm.pose_of(m.pose.pose)
         if np.isfinite(self._odom_pose[i, 0]):
             self._map_T_odom[i] = rm.compose(pose, rm.inverse(self._odom_pose[i]))
-        return PoseReport(self.ids[i], rm.stamp_of(m) - self.t0, pose, self._next_seq())
+        return PoseReport(self.ids[i], rm.stamp_of(m) - self.t0, pose, _SEQ)
 
     # ------------------------------------------------------------------ robots out
 
