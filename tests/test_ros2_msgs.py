@@ -269,3 +269,21 @@ def test_duplicated_and_reordered_ros_messages_are_ignored_by_stamp():
         inbox.absorb(link._from_odom(0, "s1", m))
     assert inbox.ignored == 4  # (odometry and the pose derived from it) x 2
     assert inbox.odom[0, 0] == 1.0 and inbox.odom_stamp[0] == 2.0
+
+
+def test_markers_show_footprints_goals_boundary_and_paths():
+    from swarmpark.links.ros2_viz import markers
+    from swarmpark.supervisor.core import Supervisor
+
+    sup = Supervisor(_world())
+    for _ in range(3):
+        sup.tick()
+    arr = markers(sup, 10.0)
+    data = rm.serialize(arr, "visualization_msgs/msg/MarkerArray")
+    back = rm.deserialize(data, "visualization_msgs/msg/MarkerArray").markers
+    ns = [m.ns for m in back]
+    assert back[0].action == 3  # DELETEALL first
+    assert ns.count("footprints") == 6 and ns.count("goals") == 6
+    assert ns.count("boundary") == 1 and ns.count("paths") >= 1
+    ring = np.array([(p.x, p.y) for p in back[ns.index("footprints")].points])
+    assert len(ring) == 5 and np.allclose(ring[0], ring[-1])
