@@ -165,16 +165,22 @@ class FakeFleet:
         from swarmpark.core.geometry import footprint_corners
 
         corners = footprint_corners(self.poses, self.corners_body)
+        # Broad phase: only skids whose corner boxes overlap can touch.
+        lo, hi = corners.min(1), corners.max(1)
+        near = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
         polys = [Polygon(c) for c in corners]
-        for a in range(len(polys)):
-            for b in range(a + 1, len(polys)):
-                if polys[a].intersection(polys[b]).area > 1e-6:
-                    self._collide(self.ids[a], self.ids[b])
-            for k, ob in enumerate(self.world.static_obstacles):
+        for a, b in zip(*np.nonzero(np.triu(near, 1)), strict=True):
+            if polys[a].intersection(polys[b]).area > 1e-6:
+                self._collide(self.ids[a], self.ids[b])
+        for k, ob in enumerate(self.world.static_obstacles):
+            x0, y0, x1, y1 = ob.bounds
+            cand = (hi[:, 0] >= x0) & (lo[:, 0] <= x1) & (hi[:, 1] >= y0) & (lo[:, 1] <= y1)
+            for a in np.flatnonzero(cand):
                 if polys[a].intersection(ob).area > 1e-6:
                     self._collide(self.ids[a], f"obstacle{k}")
-            if np.any(self.world.grid.is_occupied(corners[a])):
-                self._collide(self.ids[a], "wall")
+        walls = self.world.grid.is_occupied(corners.reshape(-1, 2)).reshape(len(corners), 4)
+        for a in np.flatnonzero(walls.any(1)):
+            self._collide(self.ids[a], "wall")
 
     def _collide(self, a: str, b: str) -> None:
         if (a, b) not in self.collisions:
