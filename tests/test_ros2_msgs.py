@@ -94,6 +94,7 @@ def test_twist_bytes_equal_rclpy():
     m.linear.x, m.angular.z = 0.35, -0.8
     T = "geometry_msgs/msg/Twist"
     _same_cdr(rm.serialize(rm.twist(0.35, -0.8), T), _rclpy_bytes(m), T)
+    assert rm.twist_cdr(0.35, -0.8) == rm.serialize(rm.twist(0.35, -0.8), T)  # the fast path
 
 
 def test_odometry_bytes_equal_rclpy():

@@ -121,9 +121,12 @@ class _Endpoint:
         )
 
     def write(self, message) -> None:
+        self.write_cdr(rm.serialize(message, self.typename))
+
+    def write_cdr(self, data: bytes) -> None:
+        """Write one sample already in CDR (with its encapsulation header)."""
         from cyclonedds._clayer import ddspy_write
 
-        data = rm.serialize(message, self.typename)
         data = data.ljust((len(data) + 3) & ~3, b"\0")  # DDS samples are padded to 4 bytes
         ret = ddspy_write(self.entity._ref, data)
         if ret < 0:
@@ -361,9 +364,9 @@ class Ros2Link:
     def _write_cmd(self, i: int, v: float, omega: float, stamp: float) -> None:
         if self.opt.cmd_stamped:
             m = rm.twist_stamped(stamp, f"{self.ids[i]}/base_link", v, omega)
+            self._cmd[i].write(m)
         else:
-            m = rm.twist(v, omega)
-        self._cmd[i].write(m)
+            self._cmd[i].write_cdr(rm.twist_cdr(v, omega))
 
     def _send_zero(self, idx) -> None:
         t = time.time()
