@@ -412,6 +412,12 @@ class Ros2Link:
         self._last_state = t
         stamp = t + self.t0
         frame = self.opt.map_frame
+        if getattr(sup, "sensing", None) is not None:
+            # swarmpark localizes the robots (AMCL on their scans): map -> odom from its
+            # estimates and the odometry they were made with.
+            est, odom = sup.estimates, sup.inbox.odom
+            for i in np.flatnonzero(np.isfinite(est[:, 0]) & np.isfinite(odom[:, 0])):
+                self._map_T_odom[i] = rm.compose(est[i], rm.inverse(odom[i]))
         tfs = [
             rm.transform(stamp, frame, f"{rid}/odom", self._map_T_odom[i])
             for i, rid in enumerate(self.ids)
