@@ -82,6 +82,8 @@ def cmd_run(args) -> int:
         world = build_world(scn)
     except ScenarioError as exc:
         return _fail(f"{args.scenario}: {exc}")
+    from swarmpark.links.ros2 import link_from_args
+
     observers = []
     if args.record:
         from swarmpark.record import RecordConfig, Recorder
@@ -94,11 +96,23 @@ def cmd_run(args) -> int:
             return _fail(f"run --record: {exc}")
         observers.append(Recorder([sink], config, meta={"file": Path(args.scenario).name}))
     show = sys.stderr.isatty() and not args.quiet
+    link = None
     try:
-        out = run_world(world, progress=terminal_progress if show else None, observers=observers)
+        link = link_from_args(world, args)  # None: the simulator
+        out = run_world(
+            world,
+            progress=terminal_progress if show else None,
+            observers=observers,
+            link=link,
+        )
+    except (ValueError, TimeoutError) as exc:
+        return _fail(f"run --link {args.link}: {exc}")
     finally:
         for o in observers:
-            o.on_end(o.sup)  # closes the file if the run failed (a no-op after a clean end)
+            if o.sup is not None:
+                o.on_end(o.sup)  # closes the file if the run failed (a no-op after a clean end)
+        if link is not None:
+            link.close()  # the robots stop
     if show:
         sys.stderr.write("\n")
     if args.out:
@@ -343,6 +357,12 @@ def cmd_figures(args) -> int:
 # ----------------------------------------------------------------------------- main
 
 
+def _add_link_args(p) -> None:
+    from swarmpark.links.ros2 import add_link_args
+
+    add_link_args(p)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="swarmpark", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -364,6 +384,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     r.add_argument("--seed", type=_seed, help="override the scenario's seed")
     r.add_argument("--duration", type=_positive, metavar="S", help="override duration_s")
+    _add_link_args(r)
     r.set_defaults(func=cmd_run)
 
     rp = sub.add_parser("replay", help="replay a recorded run (MCAP) in the browser UI")

@@ -61,18 +61,25 @@ def run_world(
     progress: Callable[[float, float], None] | None = None,
     record_every: int = 1,
     observers: Sequence[RunObserver] = (),
+    link=None,
+    health=None,
 ) -> RunOutput:
     """Run ``world`` until ``duration_s`` or until settled; returns the result and trajectories.
 
     ``observers`` (e.g. a :class:`swarmpark.record.Recorder`) see the start, every tick
     (outside the timed part, so ``tick_ms`` is the core's alone) and the result.
+    ``link`` is the robots (default: the simulator); over a link with no simulator behind it
+    (ROS 2) the poses recorded are the ones the robots report and collisions are not seen.
+    A link with a ``sync(supervisor)`` method is called after every tick (operator topics,
+    visualization).
     """
-    sup = Supervisor(world, controller=controller)
+    sup = Supervisor(world, controller=controller, link=link, health=health)
     for o in observers:
         o.on_start(sup)
     scn = world.scenario
     n_ticks = int(round(scn.duration_s / scn.dt_s))
-    times, poses, people = [0.0], [sup.sim.poses.copy()], [sup.sim.person_positions()]
+    sync = getattr(sup.link, "sync", None)
+    times, poses, people = [0.0], [sup.truth_poses().copy()], [_people(sup)]
     settled_since = None
     last_report = -np.inf
     for k in range(n_ticks):
@@ -81,10 +88,12 @@ def run_world(
         sup.metrics.tick_ms.append((time.perf_counter() - t0) * 1e3)
         for o in observers:
             o.on_tick(sup)
+        if sync is not None:
+            sync(sup)
         if (k + 1) % record_every == 0:
             times.append(sup.t)
-            poses.append(sup.sim.poses.copy())
-            people.append(sup.sim.person_positions())
+            poses.append(sup.truth_poses().copy())
+            people.append(_people(sup))
         if progress is not None and sup.t - last_report >= 1.0:
             progress(sup.t, scn.duration_s)
             last_report = sup.t
@@ -94,7 +103,7 @@ def run_world(
                 break
         else:
             settled_since = None
-    result = sup.metrics.result(sup.t, sup.sim.poses, sup.goals, sup.has_goal)
+    result = sup.metrics.result(sup.t, sup.truth_poses(), sup.goals, sup.has_goal)
     recoveries = getattr(sup.controller, "recoveries", None)
     if recoveries is not None:
         # Deadlock recoveries the navigator applied (RVO): who, when, what, time to clear
@@ -116,11 +125,18 @@ def run_world(
         result["formation_error"] = [
             {"robots": [sup.ids[i] for i in f.idx], **f.metrics()} for f in sup.formations
         ]
+    if sup.health.events:
+        # Robots lost (stale odometry) or not following their commands, and when.
+        result["link_faults"] = list(sup.health.events)
     result["expect"] = scn.expect.model_dump(exclude_none=True)
     result["expect_met"], result["expect_failures"] = check_expect(result, scn.expect)
     for o in observers:
         o.on_end(sup, result)
     return RunOutput(result, np.asarray(times), np.stack(poses), np.stack(people), sup)
+
+
+def _people(sup) -> np.ndarray:
+    return sup.sim.person_positions() if sup.sim is not None else np.zeros((0, 2))
 
 
 def check_expect(result: dict, expect) -> tuple[bool, list[str]]:

@@ -108,6 +108,7 @@ def create_app(
     autostart: bool = True,
     scripted: bool = True,
     observers: Sequence = (),
+    link_factory=None,
 ) -> FastAPI:
     """Build the operator-interface app for one scenario.
 
@@ -130,6 +131,9 @@ def create_app(
         Watchers of every run (:class:`swarmpark.record.live.LiveRecording`,
         :class:`swarmpark.record.audit.AuditLog`); with any, every ``POST /api/...`` is
         also passed to their ``on_command`` as an audit entry (client, token, answer).
+    link_factory
+        Builds the robots' link for a world (``None``: the simulator; ROS 2: see
+        :func:`swarmpark.links.ros2.link_from_args`).
 
     Raises
     ------
@@ -140,7 +144,14 @@ def create_app(
     path = Path(scenario_path) if scenario_path is not None else default_scenario(sdir)
     if token is not None and not token.strip():
         raise ValueError("token: must not be empty")
-    session = Session(path, speed=speed, running=autostart, scripted=scripted, observers=observers)
+    session = Session(
+        path,
+        speed=speed,
+        running=autostart,
+        scripted=scripted,
+        observers=observers,
+        link_factory=link_factory,
+    )
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):

@@ -82,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="HZ",
         help="LIDAR scans per simulated second in the recording (0: with every pose sample)",
     )
+    from swarmpark.links.ros2 import add_link_args
+
+    add_link_args(p)
     return p
 
 
@@ -163,6 +166,15 @@ def serve_command(argv: list[str]) -> int:
         except SystemExit as exc:  # -h / --help printed the usage
             return int(exc.code or 0)
         _check(args)
+        factory = None
+        if args.link == "ros2":
+            if args.speed != 1.0:
+                raise _BadInput("swarmpark serve: error: --link ros2 runs in real time (--speed 1)")
+            from swarmpark.links.ros2 import link_from_args
+
+            def factory(world):
+                return link_from_args(world, args, paced=False)  # the session paces
+
         try:
             observers, notes = _observers(args)
         except (OSError, RuntimeError) as exc:  # the Foxglove port in use (FoxgloveError)
@@ -170,6 +182,7 @@ def serve_command(argv: list[str]) -> int:
         try:
             app = create_app(
                 args.scenario,
+                link_factory=factory,
                 token=args.token,
                 scenarios_dir=args.scenarios_dir,
                 speed=args.speed,

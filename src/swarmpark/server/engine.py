@@ -103,8 +103,12 @@ class Session:
         scripted: bool = True,
         clock: Callable[[], float] = time.monotonic,
         observers: Sequence = (),
+        link_factory: Callable[[World], object] | None = None,
     ) -> None:
         self.observers = list(observers)
+        #: Builds the robots' link for a world (``None``: the simulator); e.g. ROS 2.
+        self.link_factory = link_factory
+        self.sup: Supervisor | None = None
         self.speed = float(speed)
         self.clock = clock
         self.paused = not running
@@ -146,7 +150,13 @@ class Session:
 
     def _start(self, world: World) -> None:
         self._end_observers()
-        self.sup = Supervisor(world)
+        old = getattr(self.sup, "link", None)
+        if old is not None and hasattr(old, "close"):
+            old.close()  # the robots of a real link stop
+        link = self.link_factory(world) if self.link_factory is not None else None
+        self.sup = Supervisor(world, link=link)
+        self._ticks = 0
+        self._sync = getattr(self.sup.link, "sync", None)
         for o in self.observers:
             o.on_start(self.sup)
         self.encoder = FrameEncoder(self.sup)
@@ -205,7 +215,7 @@ class Session:
             "t_s": round(self.sup.t, 3),
             "paused": self.paused,
             "speed": self.speed,
-            "ticks": self.sup.sim.tick,
+            "ticks": self._ticks,
             "error": self.error,
         }
 
@@ -245,6 +255,9 @@ class Session:
         self._keep_teleop_alive()
         t0, c0 = time.perf_counter(), time.process_time()
         self.sup.tick()
+        self._ticks += 1
+        if self._sync is not None:
+            self._sync(self.sup)  # a real link's operator topics and visualization
         ms = (time.perf_counter() - t0) * 1e3
         self.tick_ms.append(ms)
         self._tick_wall_ms += ms
@@ -273,7 +286,7 @@ class Session:
         if self.paused or self.error:
             self._budget_s = 0.0
             return 0
-        dt = self.sup.sim.dt
+        dt = self.sup.info.dt_s
         self._budget_s += wall_elapsed_s * self.speed
         n = min(int((self._budget_s + 1e-9) // dt), MAX_TICKS_PER_FRAME)
         self._budget_s -= n * dt
@@ -283,7 +296,7 @@ class Session:
 
     def _carry(self, ticks: int, max_wall_s: float) -> None:
         """Put ``ticks`` back into the budget, keeping at most ``max_wall_s`` of backlog."""
-        dt = self.sup.sim.dt
+        dt = self.sup.info.dt_s
         self._budget_s = min(self._budget_s + ticks * dt, max(max_wall_s * self.speed, dt))
 
     def advance(self, wall_elapsed_s: float) -> int:
@@ -346,7 +359,7 @@ class Session:
             "frames": len(rows),
             "ticks": ticks,
             "clients": len(self.clients),
-            "robots": self.sup.sim.n,
+            "robots": self.sup.n,
             "cpu_ms_per_tick": round(sum(cpu) / ticks, 3) if ticks else None,
             "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 3) if cpu else None,
             "cpu_ms_per_frame_p99": round(float(np.percentile(cpu, 99)), 3) if cpu else None,
@@ -359,7 +372,7 @@ class Session:
             "frames_sent": self.frames_sent,
             "frames_paced": self.frames_paced,
             "sim_t_s": round(self.sup.t, 3),
-            "ticks_total": self.sup.sim.tick,
+            "ticks_total": self._ticks,
             "monotonic_s": round(time.monotonic(), 4),
         }
 

@@ -151,7 +151,7 @@ class FrameEncoder:
             else:
                 out.append(np.round(np.asarray(p, float)[:, :2], LINE_DEC).ravel().tolist())
         # Pad: a controller may not know robots that never had a goal yet.
-        out += [None] * (self.sup.sim.n - len(out))
+        out += [None] * (self.sup.n - len(out))
         return out
 
     def _groups(self) -> list | None:
@@ -199,7 +199,7 @@ class FrameEncoder:
 
     def _metrics(self) -> dict:
         sup = self.sup
-        r = sup.metrics.result(sup.t, sup.sim.poses, sup.goals, sup.has_goal)
+        r = sup.metrics.result(sup.t, sup.truth_poses(), sup.goals, sup.has_goal)
         commanded = sum(1 for s in r["robots"].values() if s["commanded"])
         parked = sum(1 for s in r["robots"].values() if s["parked"])
         return {
@@ -222,19 +222,19 @@ class FrameEncoder:
         Must be called once per broadcast so "changed since last frame" stays true.
         """
         sup = self.sup
-        sim = sup.sim
+        poses, vel = sup.truth_poses(), sup.truth_vel()  # a real link: what the robots report
         states = [_STATE_CODE[m] for m in sup.modes()]
         robots = np.column_stack(
             [
-                np.round(sim.poses[:, :2], XY_DEC),
-                np.round(np.rad2deg(sim.poses[:, 2]), DEG_DEC),
+                np.round(poses[:, :2], XY_DEC),
+                np.round(np.rad2deg(poses[:, 2]), DEG_DEC),
                 states,
-                np.round(sim.vel[:, 0], V_DEC),
+                np.round(vel[:, 0], V_DEC),
             ]
         ).tolist()
         for row in robots:  # the state code is an index, not a float
             row[3] = int(row[3])
-        ppos = sim.person_positions()
+        ppos = sup.sim.person_positions() if sup.sim is not None else np.zeros((0, 2))
         people = [[round(float(x), LINE_DEC), round(float(y), LINE_DEC)] for x, y in ppos.tolist()]
         fast = {
             "type": "state",

@@ -308,6 +308,7 @@ class CommandsMixin:
         if names == "all":
             self.estopped = False
         self.stopped[idx] = False
+        self.health.release(idx)
         return self._accept("resume", robots=[self.ids[i] for i in idx])
 
     def set_teleop(self, robot: str, v: float, omega: float) -> Outcome:

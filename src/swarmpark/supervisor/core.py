@@ -33,12 +33,14 @@ from swarmpark.sim.link import SimLink
 from swarmpark.sim.simulator import Simulator, StepResult
 from swarmpark.supervisor import fill_order, reports
 from swarmpark.supervisor.commands import FORMATION_GRACE_S, CommandsMixin, Outcome, ParkGroup
+from swarmpark.supervisor.health import Health, HealthParams
 from swarmpark.supervisor.sensing import OnboardSensing
 from swarmpark.world.scenario import World
 
 __all__ = ["Supervisor", "Outcome", "ParkGroup", "ROBOT_STATES", "TELEOP_TIMEOUT_S"]
 
-ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck")
+#: A robot's state; "lost": its odometry stopped arriving (:mod:`.health`).
+ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "stuck", "lost")
 #: Teleop commands older than this are dropped (the operator let go or the link died).
 TELEOP_TIMEOUT_S = 0.5
 
@@ -56,6 +58,8 @@ class Supervisor(CommandsMixin):
         The robots: a :class:`~swarmpark.links.base.RobotLink`; ``None`` builds a
         :class:`~swarmpark.sim.link.SimLink` of ``world``; a bare
         :class:`~swarmpark.sim.simulator.Simulator` is wrapped in one.
+    health
+        Heartbeat and command-following limits (:class:`~.health.HealthParams`).
     """
 
     def __init__(
@@ -63,6 +67,7 @@ class Supervisor(CommandsMixin):
         world: World,
         controller: Controller | None = None,
         link: RobotLink | Simulator | None = None,
+        health: HealthParams | None = None,
     ) -> None:
         from swarmpark.control.nav.navigator import (  # the default navigation stack
             Navigator,
@@ -121,6 +126,10 @@ class Supervisor(CommandsMixin):
             raise ValueError("sensing.kidnap: needs a link that can carry robots (the simulator)")
         if world.scenario.sensing.localization == "amcl":
             self.sensing = OnboardSensing(world, self.info, self.inbox, self._base_grid)
+        #: Robots lost (stale odometry) or not following their commands (:mod:`.health`).
+        self.health = Health(self.ids, self.info, health)
+        self.health.heartbeat(self.t, self.inbox.odom_stamp)
+        self._sent = np.zeros((n, 2))
         self.metrics = MetricsRecorder(self.ids, self.truth_poses().copy())
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
@@ -179,6 +188,8 @@ class Supervisor(CommandsMixin):
         for i in range(self.n):
             if self.estopped:
                 out.append("estopped")
+            elif self.health.lost[i]:
+                out.append("lost")
             elif self.teleop[i]:
                 out.append("teleop")
             elif self.stopped[i]:
@@ -252,6 +263,7 @@ class Supervisor(CommandsMixin):
             & ~self.stopped
             & ~self.teleop
             & (not self.estopped)
+            & ~self.health.faulted
             & ~self._formation_mask(),
             priority=self.priority.copy(),
             footprints=info.footprints,
@@ -266,7 +278,8 @@ class Supervisor(CommandsMixin):
             static_pieces=static_pieces,
             goal_changed=self.goal_changed.copy(),
             hold=self.held(),
-            stopped=self.stopped | self.teleop | self.estopped,
+            # A lost robot is an immobile obstacle at its last known pose.
+            stopped=self.stopped | self.teleop | self.estopped | self.health.faulted,
             hold_zones=tuple(self.hold_zones()),
         )
 
@@ -287,6 +300,7 @@ class Supervisor(CommandsMixin):
                 cmd[f.idx] = np.where(go[:, None], fc, 0.0)
         fresh = self.teleop & (self.t - self._teleop_t <= TELEOP_TIMEOUT_S)
         cmd[fresh] = self._teleop_cmd[fresh]
+        cmd[self.health.faulted] = 0.0
         return cmd
 
     def tick(self):
@@ -300,27 +314,46 @@ class Supervisor(CommandsMixin):
         cmd = self._commands(view)
         self.goal_changed[:] = False
         t = self.t
+        # Never a command to a robot whose state is unknown (it never reported).
+        known = ~self.health.unknown
         self.link.send(
             [
                 VelocityCommand(rid, t, float(v), float(w))
-                for rid, (v, w) in zip(self.ids, cmd.tolist(), strict=True)
+                for rid, (v, w), ok in zip(self.ids, cmd.tolist(), known, strict=True)
+                if ok
             ]
         )
+        self._sent = np.where(known[:, None], cmd, 0.0)
         if self.estopped:
             self.link.stop(list(self.ids))
         step = self.link.spin()
         if step is None:
             step = StepResult()
         self.inbox.absorb(self.link.receive())
+        self._check_health()
         if self.sensing is not None:
             self._sense()
         # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
-        paused = self.stopped | self.teleop | self.estopped | view.hold
+        paused = self.stopped | self.teleop | self.estopped | view.hold | self.health.faulted
         aside = getattr(self.controller, "making_room", None)  # standing aside (RVO)
         if aside is not None and len(aside) == self.n:
             paused = paused | aside
         self.metrics.on_step(self.t, self.truth_poses(), self.goals, self.has_goal, paused, step)
         return step
+
+    def _check_health(self) -> None:
+        """Heartbeat and command following on what came back (:mod:`.health`); a robot
+        that does not follow is stopped (a lost one gets zero commands; its own dead-man
+        stops it if those do not arrive either)."""
+        h = self.health
+        h.heartbeat(self.t, self.inbox.odom_stamp)
+        # A robot that reports itself blocked (in contact) says why it does not follow.
+        blocked = np.array([st == "blocked" for st in self.inbox.status], dtype=bool)
+        watch = ~h.lost & ~self.stopped & (not self.estopped) & ~blocked
+        bad = h.follow(self.t, self.info.dt_s, self._sent, self.inbox.vel, watch)
+        if bad.any():
+            self.stopped[bad] = True
+            self.link.stop([self.ids[i] for i in np.flatnonzero(bad)])
 
     def _sense(self) -> None:
         """Localize and detect on what the link reported; record the error against the truth."""

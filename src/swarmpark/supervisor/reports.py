@@ -74,6 +74,7 @@ def snapshot(sup) -> dict:
     skids are (the truth when the link is the simulator), their goals and states."""
     poses, vel = sup.truth_poses(), sup.truth_vel()
     fps = sup.info.footprints
+    faults = sup.health.fault_names()
     return {
         "t_s": round(sup.t, 3),
         "estop": sup.estopped,
@@ -83,6 +84,8 @@ def snapshot(sup) -> dict:
                 "pose": [round(float(v), 4) for v in poses[i]],
                 "vel": [round(float(v), 4) for v in vel[i]],
                 "state": m,
+                # "lost" (stale odometry) or "not_following" its commands (supervisor.health)
+                "fault": faults.get(rid),
                 "goal": [round(float(v), 4) for v in sup.goals[i]] if sup.has_goal[i] else None,
                 "priority": float(sup.priority[i]),
                 "footprint": {

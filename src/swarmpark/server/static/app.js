@@ -5,7 +5,7 @@
 
 const STATE_COLOURS = {
   idle: "#8a939c", moving: "#3ea6ff", parked: "#3fbf5f", stopped: "#f0a020",
-  estopped: "#e0242c", teleop: "#a66bff", stuck: "#ff4fd8",
+  estopped: "#e0242c", teleop: "#a66bff", stuck: "#ff4fd8", lost: "#7d2b2b",
 };
 const PATH_COLOUR = "#4cd964";
 const GAMEPAD_DEADZONE = 0.15;
