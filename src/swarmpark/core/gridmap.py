@@ -131,6 +131,41 @@ class OccupancyGrid:
         neigh = free[:-2, 1:-1] | free[2:, 1:-1] | free[1:-1, :-2] | free[1:-1, 2:]
         return np.argwhere(occ & neigh)
 
+    def footprint_hits(self, corners: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Bool ``(N,)``: the convex footprint ``corners`` ``(N, K, 2)`` overlaps an occupied
+        cell (the separating-axis test against each cell's square, exact) or reaches outside
+        the map. ``mask`` (default: the occupied cells) picks the cells that count.
+
+        >>> g = OccupancyGrid(np.array([[0, 0, 0], [0, 1, 0], [0, 0, 0]], bool), 1.0)
+        >>> sq = np.array([[0.2, 0.2], [0.8, 0.2], [0.8, 0.8], [0.2, 0.8]])
+        >>> g.footprint_hits(np.stack([sq, sq + 1.0, sq + 5.0])).tolist()
+        [False, True, True]
+        """
+        from swarmpark.core.geometry import TOUCH_TOLERANCE_M, convex_overlap
+
+        corners = np.asarray(corners, float)
+        mask = self.occupied if mask is None else mask
+        res, (ox, oy) = self.resolution_m, self.origin
+        h, w = self.shape
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        c0 = np.floor((lo[:, 0] - ox) / res).astype(int)
+        r0 = np.floor((lo[:, 1] - oy) / res).astype(int)
+        c1 = np.ceil((hi[:, 0] - ox) / res).astype(int)
+        r1 = np.ceil((hi[:, 1] - oy) / res).astype(int)
+        tol = TOUCH_TOLERANCE_M
+        xmin, ymin, xmax, ymax = self.bounds
+        out = (lo[:, 0] < xmin - tol) | (lo[:, 1] < ymin - tol)
+        out |= (hi[:, 0] > xmax + tol) | (hi[:, 1] > ymax + tol)
+        for i in np.flatnonzero(~out):
+            window = mask[max(r0[i], 0) : min(r1[i], h), max(c0[i], 0) : min(c1[i], w)]
+            if not window.any():
+                continue
+            rc = np.argwhere(window) + [max(r0[i], 0), max(c0[i], 0)]
+            squares = self.cell_squares(rc)
+            depth = convex_overlap(np.repeat(corners[i : i + 1], len(squares), axis=0), squares)
+            out[i] = bool(np.any(depth > tol))
+        return out
+
     def cell_squares(self, rc: np.ndarray) -> np.ndarray:
         """Counter-clockwise corner squares ``(N, 4, 2)`` of cells ``(N, 2)``."""
         r = self.resolution_m

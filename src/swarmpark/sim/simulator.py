@@ -91,6 +91,17 @@ class Simulator:
         self.static_pieces, self.static_owner = world.static_convex_pieces()
         lo, hi = self.static_pieces.min(axis=1), self.static_pieces.max(axis=1)
         self._static_tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        # A map image's occupied blocks are solid all through: the pieces above are their
+        # outline cells, and the interior cells are checked on the grid (a skid that got
+        # inside a block some other way, carried there by hand, still collides).
+        self._interior = None
+        if not world.wall_polygons:
+            interior = world.grid.occupied.copy()
+            interior[tuple(world.grid.boundary_cells().T)] = False
+            if interior.any():
+                self._interior = interior
+                # Summed-area table: which footprints' boxes hold any interior cell, at once.
+                self._interior_sat = np.pad(interior.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
         self._active: set[tuple[str, str]] = set()
 
     # ------------------------------------------------------------------ queries
@@ -234,6 +245,11 @@ class Simulator:
                 contacts.add(
                     (self.ids[a], owner, "robot-wall" if owner == "wall" else "robot-obstacle")
                 )
+            if self._interior is not None:
+                near = fr[self._boxes_hold_interior(corners[fr])]
+                inside = near[self.world.grid.footprint_hits(corners[near], self._interior)]
+                bad_r[inside] = True
+                contacts |= {(self.ids[a], "wall", "robot-wall") for a in inside}
 
         # Robot-person: discs against every footprint within reach.
         if self.people and (focus_r.any() or focus_p.any()):
@@ -254,6 +270,19 @@ class Simulator:
                     for a, b in zip(ri[hit], pi[hit], strict=True)
                 }
         return bad_r, bad_p, contacts
+
+    def _boxes_hold_interior(self, corners: np.ndarray) -> np.ndarray:
+        """Bool ``(N,)``: the footprints' bounding boxes hold an interior block cell."""
+        grid = self.world.grid
+        h, w = grid.shape
+        res, (ox, oy) = grid.resolution_m, grid.origin
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        c0 = np.clip(np.floor((lo[:, 0] - ox) / res).astype(int), 0, w)
+        r0 = np.clip(np.floor((lo[:, 1] - oy) / res).astype(int), 0, h)
+        c1 = np.clip(np.ceil((hi[:, 0] - ox) / res).astype(int), 0, w)
+        r1 = np.clip(np.ceil((hi[:, 1] - oy) / res).astype(int), 0, h)
+        sat = self._interior_sat
+        return (sat[r1, c1] - sat[r0, c1] - sat[r1, c0] + sat[r0, c0]) > 0
 
     def _clearances(self):
         """Per-robot footprint distance to the nearest robot and static solid (capped at

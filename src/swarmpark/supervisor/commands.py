@@ -244,6 +244,11 @@ class CommandsMixin:
                 f"goto.pose: robot {self.ids[i]!r} would overlap {owner.replace(':', ' ')} at "
                 f"{[round(float(goal[0]), 3), round(float(goal[1]), 3), round(float(np.rad2deg(goal[2])), 1)]}"
             )
+        if self.world.off_map_or_in_cells(corners)[0]:
+            return (
+                f"goto.pose: robot {self.ids[i]!r} would be in an occupied cell of the map or "
+                f"outside it at {[round(float(v), 3) for v in goal[:2]]}"
+            )
         return ""
 
     def formation(self, cmd) -> Outcome:

@@ -108,6 +108,14 @@ class World:
     def ids(self) -> list[str]:
         return [r.id for r in self.robots]
 
+    def off_map_or_in_cells(self, corners: np.ndarray) -> np.ndarray:
+        """Bool ``(N,)``: the footprints ``corners`` ``(N, 4, 2)`` reach outside the map or,
+        on a map_server image, overlap an occupied cell (exactly: a block's interior counts,
+        not only its outline). Polygon walls are tested exactly by the convex pieces."""
+        grid = self.grid
+        mask = np.zeros_like(grid.occupied) if self.wall_polygons else None
+        return grid.footprint_hits(corners, mask)
+
     def static_convex_pieces(self) -> tuple[np.ndarray, list[str]]:
         """Every static solid as convex pieces padded to 4 vertices, and who owns each piece.
 
@@ -328,6 +336,11 @@ def _check_kidnaps(world: World) -> None:
             raise ScenarioError(
                 f"{f}.pose: robot {kid.robot!r} would be inside {where} (got {kid.pose})"
             )
+        if world.off_map_or_in_cells(corners)[0]:
+            raise ScenarioError(
+                f"{f}.pose: robot {kid.robot!r} would be in an occupied cell of the map or "
+                f"outside it (got {kid.pose})"
+            )
 
 
 def _check_start_poses(world: World) -> None:
@@ -338,6 +351,7 @@ def _check_start_poses(world: World) -> None:
     pieces, owners = world.static_convex_pieces()
     n, p = len(corners), len(pieces)
     gaps = convex_gap(np.repeat(corners, p, axis=0), np.tile(pieces, (n, 1, 1))).reshape(n, p)
+    off = world.off_map_or_in_cells(corners)
     for i, r in enumerate(world.robots):
         hit = np.flatnonzero(gaps[i] < 0)
         if len(hit):
@@ -346,6 +360,12 @@ def _check_start_poses(world: World) -> None:
             raise ScenarioError(
                 f"robots[{listed[r.id]}].pose: robot {r.id!r} starts {where} at "
                 f"{[float(v) for v in world.scenario.robots[listed[r.id]].pose]}"
+            )
+        if off[i]:  # past the walls: off the map, or inside a block of a map image
+            raise ScenarioError(
+                f"robots[{listed[r.id]}].pose: robot {r.id!r} starts "
+                f"{'in an occupied cell of the map or ' if not world.wall_polygons else ''}"
+                f"outside the map at {[float(v) for v in world.scenario.robots[listed[r.id]].pose]}"
             )
     iu, ju = np.triu_indices(n, 1)
     if len(iu):
