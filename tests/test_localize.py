@@ -358,15 +358,18 @@ def _fleet_run(
         spec,
         truth[0],
         rng=rng,
+        odom_start=truth[0],
         update_min_d_m=update_min_d_m,
         footprint=fp if others_known else None,
         config=config,
     )
+    # The skids' drifting wheel odometry (the robots' side), on the next child stream.
+    odo = OdometryDrift(truth[0], rng=rng.spawn(1)[0])
     est = []
     for poses in truth:
         polys = footprint_corners(poses, np.broadcast_to(fp.corners_body(), (3, 4, 2)))
         ranges = scan(spec, poses, gf, polygons=polys, polygon_owner=np.arange(3), rng=rng)
-        est.append(loc.step(poses, ranges))
+        est.append(loc.step(odo.step(poses), ranges))
     return np.array(est), truth
 
 
@@ -398,17 +401,20 @@ def _row_run(config: FilterConfig, known: bool, seed: int = 1) -> dict:
     route = drive([[2.0, 4.8], [16.0, 4.8]])
     spec = LidarSpec(range_noise_std_m=0.01)
     rng = np.random.default_rng(seed)
+    loc_rng = np.random.default_rng(seed + 1)
     loc = FleetLocalizer(
         LikelihoodField(g, min_clearance_m=0.3),
         spec,
         route[:1],
-        rng=np.random.default_rng(seed + 1),
+        rng=loc_rng,
+        odom_start=route[:1],
         config=config,
     )
+    odo = OdometryDrift(route[:1], rng=loc_rng.spawn(1)[0])
     est = []
     for p in route:
         r = scan(spec, p[None], gf, polygons=row, rng=rng)
-        est.append(loc.step(p[None], r, known_polygons=row if known else None))
+        est.append(loc.step(odo.step(p[None]), r, known_polygons=row if known else None))
     return pose_error_summary(np.array(est), route[:, None, :])
 
 

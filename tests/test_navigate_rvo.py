@@ -27,6 +27,7 @@ def test_rollout_follows_the_simulator_within_the_acceleration_limits():
     cmd = np.array([[0.1, -1.0]])
     sup = Supervisor(world, controller=Scripted(lambda t: cmd))
     sup.sim.vel[:] = [[0.4, 0.8]]  # turning left fast; told to turn right
+    sup.inbox.vel[:] = sup.sim.vel  # as the skid's odometry reports it (the view reads the link)
     view = sup.view()
     times = np.array([0.2, 0.5, 1.0])
     predicted = _navigator(view)._rollout(view, np.array([0]), cmd[:, 0], cmd[:, 1], times)[0]

@@ -678,3 +678,24 @@ def test_people_are_streamed_with_their_radius(tmp_path):
     assert state(c)["people"] == [[5.0, 7.5]]
     step(c, 20)  # 1 s at 1 m/s along +x
     assert state(c)["people"] == [[6.0, 7.5]]
+
+
+# ----------------------------------------------------------------------------- formation
+
+
+def test_formation_reaches_the_api(app, client):
+    """POST /api/formation is generated from the command registry like park and goto."""
+    body = {"robots": ["s1", "s3"], "paths": [[[2.0, 2.0], [8.0, 2.0]]]}
+    r = client.post("/api/formation", json=body)
+    assert r.status_code == 200, r.text
+    assert r.json()["accepted"] and r.json()["command"] == "formation"
+    assert np.allclose(sup_of(app).goals[0, :2], [8.0, 2.0])
+    bad = client.post("/api/formation", json={**body, "robots": ["s1", "zz"]})
+    assert bad.status_code == 409
+    assert "formation.robots: unknown robot 'zz'" in bad.json()["reason"]
+    typo = client.post("/api/formation", json={**body, "speed": 1})
+    assert typo.status_code == 422 and "speed" in typo.text
+
+
+def test_an_unknown_command_has_no_route(client):
+    assert client.post("/api/dance", json={}).status_code in (404, 405)

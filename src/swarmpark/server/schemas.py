@@ -1,22 +1,32 @@
 """Request and response schemas of the operator API (pydantic), kept apart from the core.
 
-Poses at this edge are ``[x_m, y_m, heading_deg]`` as in the scenario schema, and the park
-and goto requests *are* the scenario's :class:`~swarmpark.world.scenario.ParkCmd` and
-:class:`~swarmpark.world.scenario.GotoCmd`: a command that works in a scenario file works here.
+Poses at this edge are ``[x_m, y_m, heading_deg]`` as in the scenario schema, and the park,
+goto and formation requests *are* the scenario's commands (they are defined with the command
+registry, :mod:`swarmpark.supervisor.registry`): a command that works in a scenario file
+works here.
 Every model forbids unknown keys, so a misspelt field is a 422 naming it, never ignored.
 """
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field
 
-from swarmpark.world.scenario import GotoCmd, ParkCmd
+# The command bodies live with the command registry (one place per command).
+from swarmpark.supervisor.registry import (
+    FormationRequest,
+    GotoRequest,
+    ParkRequest,
+    ReleaseRequest,
+    RobotsRequest,
+    TeleopRequest,
+)
 
 __all__ = [
     "ParkRequest",
     "GotoRequest",
+    "FormationRequest",
     "RobotsRequest",
     "TeleopRequest",
     "ReleaseRequest",
@@ -47,59 +57,6 @@ MAX_STEP_TICKS = 2000
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class ParkRequest(ParkCmd):
-    """Park ``robots`` inside ``boundary`` (``[[x, y], ...]``, metres, at least 3 vertices).
-
-    ``heading_deg`` is the parked yaw in degrees (or ``"auto"``), ``method`` a layout method
-    and ``assignment`` a robot-to-goal cost, both as listed by ``GET /api/meta`` (from their
-    registries); ``margin_m`` the clearance between skids and to the boundary.
-    """
-
-    @field_validator("robots")
-    @classmethod
-    def _unique_robots(cls, robots: list[str]) -> list[str]:
-        seen: set[str] = set()
-        for name in robots:
-            if name in seen:
-                raise ValueError(f"robot {name!r} listed twice")
-            seen.add(name)
-        return robots
-
-    @field_validator("boundary")
-    @classmethod
-    def _three_vertices(cls, boundary: list[list[float]]) -> list[list[float]]:
-        if len(boundary) < 3:
-            raise ValueError(f"a boundary needs at least 3 vertices (got {len(boundary)})")
-        return boundary
-
-
-class GotoRequest(GotoCmd):
-    """Send one robot to ``pose`` = ``[x_m, y_m, heading_deg]`` (a new goal while moving too)."""
-
-
-class RobotsRequest(_Strict):
-    """Robots to stop or resume: a list of ids, or ``"all"``."""
-
-    robots: Annotated[list[str], Field(min_length=1)] | Literal["all"]
-
-
-class TeleopRequest(_Strict):
-    """A velocity command for one robot taken over by the operator (REP-103: v forward,
-    omega counter-clockwise). The simulator clips it to the robot's limits. The server keeps
-    applying the last command while the operator keeps sending it (a dead-man of
-    ``TELEOP_DEADMAN_S`` wall seconds); then the skid stops and waits in teleop."""
-
-    robot: str
-    v_mps: Annotated[float, Field(allow_inf_nan=False)]
-    omega_radps: Annotated[float, Field(allow_inf_nan=False)]
-
-
-class ReleaseRequest(_Strict):
-    """Hand a teleoperated robot back to autonomy."""
-
-    robot: str
 
 
 class SimControlRequest(_Strict):

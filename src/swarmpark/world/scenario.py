@@ -1,4 +1,4 @@
-"""Scenario schema (pydantic), YAML loading, and validation against the map with clear errors.
+"""Scenario schema (pydantic) and YAML loading with clear errors (the world: world/build.py).
 
 The YAML is only the serialized form of :class:`Scenario`. Angles are in degrees here (the
 user's edge) and converted to radians when the world is built. Every error is a
@@ -7,28 +7,18 @@ user's edge) and converted to radians when the world is built. Every error is a
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
-from shapely.geometry import Polygon
 
 from swarmpark.assign import ASSIGNMENT_COSTS as _COSTS
 from swarmpark.control.modes import AVOIDANCE_MODES
 from swarmpark.core.geometry import (
     Footprint,
     GeometryError,
-    as_simple_polygon,
-    body_corners,
-    convex_gap,
-    footprint_corners,
-    pad_polygons,
-    triangulate,
 )
-from swarmpark.core.gridmap import MapError, OccupancyGrid, grid_from_walls, load_map_yaml
 from swarmpark.layout.methods import LAYOUT_METHODS as _METHODS
 
 __all__ = [
@@ -38,6 +28,7 @@ __all__ = [
     "RobotConfig",
     "Person",
     "KidnapSpec",
+    "FaultSpec",
     "load_scenario",
     "parse_scenario",
     "build_world",
@@ -229,6 +220,29 @@ class SensingSpec(_Model):
     kidnap: list[KidnapSpec] = []
 
 
+class FaultSpec(_Model):
+    """A fault injected on the simulator's link to one robot (not in the robot itself), from
+    ``from_s`` to ``to_s``: ``drop`` loses every message to and from it, ``delay_s`` delivers
+    them that late (so they may arrive out of order), ``noise_m`` / ``noise_deg`` add Gaussian
+    noise (standard deviations) to the poses it reports. The e-stop is not affected."""
+
+    robot: str
+    from_s: NonNegFloat
+    to_s: PositiveFloat
+    drop: bool = False
+    delay_s: NonNegFloat = 0.0
+    noise_m: NonNegFloat = 0.0
+    noise_deg: NonNegFloat = 0.0
+
+    @model_validator(mode="after")
+    def _window_and_effect(self) -> FaultSpec:
+        if self.to_s <= self.from_s:
+            raise ValueError(f"to_s must be after from_s {self.from_s} (got {self.to_s})")
+        if not (self.drop or self.delay_s > 0 or self.noise_m > 0 or self.noise_deg > 0):
+            raise ValueError("a fault needs drop, delay_s, noise_m or noise_deg")
+        return self
+
+
 class Scenario(_Model):
     name: str
     seed: int = 0
@@ -241,6 +255,8 @@ class Scenario(_Model):
     commands: list[CommandSpec] = []
     navigation: NavigationSpec = NavigationSpec()
     sensing: SensingSpec = SensingSpec()
+    #: Faults injected on the simulator's robot link (drops, delays, noise).
+    faults: list[FaultSpec] = []
     expect: ExpectSpec = ExpectSpec()
 
 
@@ -302,281 +318,5 @@ def load_scenario(path: str | Path) -> Scenario:
     return parse_scenario(data, path.parent)
 
 
-# ----------------------------------------------------------------------------- the world
-
-
-@dataclass(frozen=True)
-class RobotConfig:
-    id: str
-    footprint: Footprint
-    start: np.ndarray  # (3,) pivot pose, radians
-    priority: float
-    max_speed_mps: float
-    max_accel_mps2: float
-    max_yaw_rate_radps: float
-    max_yaw_accel_radps2: float
-
-
-@dataclass(frozen=True)
-class Person:
-    """A moving obstacle: a disc walking a polyline at constant speed from ``start_s``."""
-
-    id: str
-    radius_m: float
-    waypoints: np.ndarray  # (W, 2)
-    speed_mps: float
-    start_s: float
-    loop: bool
-
-    @property
-    def route_length_m(self) -> float:
-        pts = np.vstack([self.waypoints, self.waypoints[:1]]) if self.loop else self.waypoints
-        return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
-
-    def position_at(self, s_m: float) -> np.ndarray:
-        """Position after walking ``s_m`` metres along the route."""
-        pts = np.vstack([self.waypoints, self.waypoints[:1]]) if self.loop else self.waypoints
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        total = seg.sum()
-        s = s_m % total if self.loop and total > 0 else min(s_m, total)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
-        f = 0.0 if seg[i] == 0 else (s - cum[i]) / seg[i]
-        return pts[i] + f * (pts[i + 1] - pts[i])
-
-
-@dataclass(frozen=True)
-class World:
-    """A validated scenario turned into SI-unit objects the simulator and supervisor use."""
-
-    scenario: Scenario
-    grid: OccupancyGrid
-    wall_polygons: tuple[Polygon, ...]  # exact walls when the map was given as polygons
-    robots: tuple[RobotConfig, ...]
-    static_obstacles: tuple[Polygon, ...]
-    people: tuple[Person, ...]
-    #: The map the skids believe in (``sensing.map``), when it is not the true one.
-    believed_grid: OccupancyGrid | None = None
-
-    @property
-    def ids(self) -> list[str]:
-        return [r.id for r in self.robots]
-
-    def static_convex_pieces(self) -> tuple[np.ndarray, list[str]]:
-        """Every static solid as convex pieces padded to 4 vertices, and who owns each piece.
-
-        Polygon walls and static obstacles are triangulated exactly; a map image contributes
-        its boundary cells as squares; the map's outer edge is a wall too.
-        """
-        pieces: list[np.ndarray] = []
-        owners: list[str] = []
-        if self.wall_polygons:
-            for poly in self.wall_polygons:
-                tris = triangulate(poly)
-                pieces.extend(tris)
-                owners.extend(["wall"] * len(tris))
-        else:
-            rc = self.grid.boundary_cells()
-            sq = self.grid.cell_squares(rc)
-            pieces.extend(sq)
-            owners.extend(["wall"] * len(sq))
-        for k, poly in enumerate(self.static_obstacles):
-            tris = triangulate(poly)
-            pieces.extend(tris)
-            owners.extend([f"obstacle:{k}"] * len(tris))
-        xmin, ymin, xmax, ymax = self.grid.bounds
-        t = 1.0  # the edge walls are 1 m thick, just outside the map
-        for x0, y0, x1, y1 in (
-            (xmin - t, ymin - t, xmax + t, ymin),
-            (xmin - t, ymax, xmax + t, ymax + t),
-            (xmin - t, ymin, xmin, ymax),
-            (xmax, ymin, xmax + t, ymax),
-        ):
-            pieces.append(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float))
-            owners.append("wall")
-        return pad_polygons(pieces, 4), owners
-
-
-def _polygon(points: list[list[float]], field: str) -> Polygon:
-    try:
-        return as_simple_polygon(points, field)
-    except GeometryError as exc:
-        raise ScenarioError(str(exc)) from None
-
-
-def build_world(scn: Scenario) -> World:
-    """Turn a schema-valid scenario into a :class:`World`, checking it against the map.
-
-    Raises :class:`ScenarioError` for a map file that does not exist, a wall or obstacle that
-    is not a simple polygon, a robot starting inside a wall or obstacle or overlapping another
-    robot, a duplicate robot id, and a command naming an unknown robot or a bad boundary.
-    """
-    # Map.
-    walls: list[Polygon] = []
-    try:
-        if scn.map.yaml is not None:
-            grid = load_map_yaml(scn.map.yaml)
-        else:
-            walls = [_polygon(w, f"map.walls[{i}]") for i, w in enumerate(scn.map.walls)]
-            grid = grid_from_walls(tuple(scn.map.size_m), scn.map.resolution_m, walls)  # type: ignore[arg-type]
-    except MapError as exc:
-        raise ScenarioError(str(exc).replace("map.yaml:", "map.yaml:", 1)) from None
-
-    # Robots.
-    d = scn.robot_defaults
-    robots: list[RobotConfig] = []
-    seen: set[str] = set()
-    for i, r in enumerate(scn.robots):
-        if r.id in seen:
-            raise ScenarioError(f"robots[{i}].id: duplicate robot id {r.id!r}")
-        seen.add(r.id)
-        fp_spec = r.footprint or d.footprint
-        robots.append(
-            RobotConfig(
-                id=r.id,
-                footprint=fp_spec.build(f"robots[{i}].footprint"),
-                start=np.array([r.pose[0], r.pose[1], np.deg2rad(r.pose[2])], float),
-                priority=r.priority,
-                max_speed_mps=r.max_speed_mps or d.max_speed_mps,
-                max_accel_mps2=r.max_accel_mps2 or d.max_accel_mps2,
-                max_yaw_rate_radps=r.max_yaw_rate_radps or d.max_yaw_rate_radps,
-                max_yaw_accel_radps2=r.max_yaw_accel_radps2 or d.max_yaw_accel_radps2,
-            )
-        )
-
-    # Obstacles and people.
-    statics: list[Polygon] = []
-    people: list[Person] = []
-    for i, o in enumerate(scn.obstacles):
-        if isinstance(o, StaticObstacleSpec):
-            statics.append(_polygon(o.polygon, f"obstacles[{i}].polygon"))
-        else:
-            wp = np.asarray(o.waypoints, float)
-            if np.any(np.linalg.norm(np.diff(wp, axis=0), axis=1) == 0):
-                raise ScenarioError(f"obstacles[{i}].waypoints: repeated waypoint in {o.waypoints}")
-            people.append(
-                Person(
-                    o.id or f"person{len(people)}", o.radius_m, wp, o.speed_mps, o.start_s, o.loop
-                )
-            )
-    pid = [p.id for p in people]
-    if len(set(pid)) != len(pid):
-        raise ScenarioError(f"obstacles: duplicate person id in {pid}")
-
-    believed = None
-    if scn.sensing.map is not None:
-        try:
-            believed = load_map_yaml(scn.sensing.map)
-        except MapError as exc:
-            raise ScenarioError(str(exc).replace("map.yaml:", "sensing.map:", 1)) from None
-    world = World(
-        scn,
-        grid,
-        tuple(walls),
-        tuple(robots),
-        tuple(statics),
-        tuple(people),
-        believed_grid=believed,
-    )
-    _check_start_poses(world)
-    _check_commands(world)
-    _check_kidnaps(world)
-    return world
-
-
-def _check_kidnaps(world: World) -> None:
-    sensing = world.scenario.sensing
-    if sensing.kidnap and sensing.localization != "amcl":
-        raise ScenarioError(
-            f"sensing.kidnap: needs sensing.localization 'amcl' (got {sensing.localization!r})"
-        )
-    ids = world.ids
-    pieces, owners = world.static_convex_pieces()
-    for k, kid in enumerate(sensing.kidnap):
-        f = f"sensing.kidnap[{k}]"
-        if kid.robot not in ids:
-            raise ScenarioError(f"{f}.robot: unknown robot (got {kid.robot!r})")
-        if kid.at_s > world.scenario.duration_s:
-            raise ScenarioError(
-                f"{f}.at_s: after the end of the run, duration_s {world.scenario.duration_s} "
-                f"(got {kid.at_s})"
-            )
-        pose = np.array([kid.pose[0], kid.pose[1], np.deg2rad(kid.pose[2])], float)
-        fp = world.robots[ids.index(kid.robot)].footprint
-        corners = footprint_corners(pose[None], body_corners([fp]))
-        gap = convex_gap(np.repeat(corners, len(pieces), axis=0), pieces)
-        if np.any(gap < 0):
-            what = owners[int(np.argmin(gap))].replace(":", " ")
-            where = "a wall" if what == "wall" else what
-            raise ScenarioError(
-                f"{f}.pose: robot {kid.robot!r} would be inside {where} (got {kid.pose})"
-            )
-
-
-def _check_start_poses(world: World) -> None:
-    fps = [r.footprint for r in world.robots]
-    poses = np.stack([r.start for r in world.robots])
-    corners = footprint_corners(poses, body_corners(fps))
-    pieces, owners = world.static_convex_pieces()
-    n, p = len(corners), len(pieces)
-    gaps = convex_gap(np.repeat(corners, p, axis=0), np.tile(pieces, (n, 1, 1))).reshape(n, p)
-    for i, r in enumerate(world.robots):
-        hit = np.flatnonzero(gaps[i] < 0)
-        if len(hit):
-            what = owners[hit[0]]
-            where = "inside a wall" if what == "wall" else f"inside {what.replace(':', ' ')}"
-            raise ScenarioError(
-                f"robots[{i}].pose: robot {r.id!r} starts {where} at "
-                f"{[float(v) for v in world.scenario.robots[i].pose]}"
-            )
-    iu, ju = np.triu_indices(n, 1)
-    if len(iu):
-        g = convex_gap(corners[iu], corners[ju])
-        bad = np.flatnonzero(g < 0)
-        if len(bad):
-            a, b = world.robots[iu[bad[0]]], world.robots[ju[bad[0]]]
-            raise ScenarioError(
-                f"robots[{ju[bad[0]]}].pose: robot {b.id!r} overlaps robot {a.id!r} at start "
-                f"(poses {world.scenario.robots[iu[bad[0]]].pose} and {world.scenario.robots[ju[bad[0]]].pose})"
-            )
-    for k, person in enumerate(world.people):
-        if person.radius_m <= 0:
-            raise ScenarioError(f"obstacles[{k}].radius_m: must be > 0 (got {person.radius_m})")
-
-
-def _check_commands(world: World) -> None:
-    ids = set(world.ids)
-    for i, c in enumerate(world.scenario.commands):
-        f = f"commands[{i}]"
-        if c.park is not None:
-            for name in c.park.robots:
-                if name not in ids:
-                    raise ScenarioError(f"{f}.park.robots: unknown robot {name!r}")
-            if len(set(c.park.robots)) != len(c.park.robots):
-                raise ScenarioError(f"{f}.park.robots: robot listed twice in {c.park.robots}")
-            _polygon(c.park.boundary, f"{f}.park.boundary")
-        elif c.goto is not None:
-            if c.goto.robot not in ids:
-                raise ScenarioError(f"{f}.goto.robot: unknown robot {c.goto.robot!r}")
-        elif c.formation is not None:
-            fc = c.formation
-            for name in fc.robots:
-                if name not in ids:
-                    raise ScenarioError(f"{f}.formation.robots: unknown robot {name!r}")
-            if len(set(fc.robots)) != len(fc.robots):
-                raise ScenarioError(f"{f}.formation.robots: robot listed twice in {fc.robots}")
-            if len(fc.paths) not in (1, len(fc.robots)):
-                raise ScenarioError(
-                    f"{f}.formation.paths: give the leader's path or one per robot "
-                    f"({len(fc.robots)} robots, got {len(fc.paths)} paths)"
-                )
-        else:
-            names = c.stop if c.stop is not None else c.resume
-            if isinstance(names, list):
-                for name in names:
-                    if name not in ids:
-                        raise ScenarioError(f"{f}.{c.kind}: unknown robot {name!r}")
-        if c.at_s > world.scenario.duration_s:
-            raise ScenarioError(
-                f"{f}.at_s: {c.at_s} is after the end of the run (duration_s {world.scenario.duration_s})"
-            )
+# The world built from a scenario lives in world/build.py; its names stay importable from here.
+from swarmpark.world.build import Person, RobotConfig, World, build_world  # noqa: E402

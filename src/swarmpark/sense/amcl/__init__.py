@@ -17,7 +17,7 @@ import warnings
 
 from swarmpark.sense.amcl.config import RECOVERY, FilterConfig, PoseEstimate
 from swarmpark.sense.amcl.filter import ParticleFilter
-from swarmpark.sense.amcl.fleet import FleetLocalizer, pose_error_summary
+from swarmpark.sense.amcl.fleet import FleetLocalizer, RobotLocalizer, pose_error_summary
 from swarmpark.sense.amcl.likelihood import LikelihoodField
 from swarmpark.sense.amcl.motion import relative_motion
 from swarmpark.sense.amcl.resample import kld_sample_count, low_variance_resample
@@ -29,6 +29,7 @@ __all__ = [
     "PoseEstimate",
     "ParticleFilter",
     "FleetLocalizer",
+    "RobotLocalizer",
     "pose_error_summary",
     "relative_motion",
     "low_variance_resample",

@@ -1,10 +1,10 @@
-"""AMCL for a whole fleet (:class:`FleetLocalizer`: one :class:`ParticleFilter` per skid,
-beams that hit other skids masked) and the run's localization error (:func:`pose_error_summary`)."""
+"""AMCL for a whole fleet (:class:`FleetLocalizer`: one onboard :class:`RobotLocalizer` per
+skid, fed with the odometry and scans the skids report; beams that hit other skids masked) and
+the run's localization error against the truth (:func:`pose_error_summary`, for reports)."""
 
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
@@ -15,10 +15,7 @@ from swarmpark.sense.amcl.filter import ParticleFilter
 from swarmpark.sense.amcl.likelihood import LikelihoodField
 from swarmpark.sense.lidar import LidarSpec, scan
 
-if TYPE_CHECKING:
-    from swarmpark.sim.odometry import OdometryDrift
-
-__all__ = ["FleetLocalizer", "pose_error_summary"]
+__all__ = ["FleetLocalizer", "RobotLocalizer", "pose_error_summary"]
 
 
 def _grow_convex(polys: np.ndarray, margin_m: float) -> np.ndarray:
@@ -30,13 +27,62 @@ def _grow_convex(polys: np.ndarray, margin_m: float) -> np.ndarray:
     return pad_polygons(rings, max(len(r) for r in rings))
 
 
-class FleetLocalizer:
-    """AMCL for every skid of a fleet, fed with simulated drifting odometry.
+class RobotLocalizer:
+    """One skid's onboard AMCL: its particle filter, fed with the odometry and the scans the
+    skid reports, as the ``amcl`` node on the robot would be.
 
-    One call per simulation step turns the skids' true poses and their scans into pose
-    estimates: the odometry model drifts from the true motion, each skid's filter predicts
-    with its odometry increment and, once it has moved far enough (amcl's ``update_min_d`` /
-    ``update_min_a``), weighs its particles by its scan.
+    The filter predicts with each odometry increment and, once the skid has moved far enough
+    since its last sensor update (amcl's ``update_min_d`` / ``update_min_a``), weighs its
+    particles by the scan. The odometry's frame does not matter, only its increments.
+
+    Parameters
+    ----------
+    filter
+        The skid's :class:`ParticleFilter`.
+    odom_start
+        The odometry pose ``(3,)`` the skid reported when the filter was seeded (``None``: the
+        first :meth:`step` only records its odometry).
+    update_min_d_m, update_min_a_rad
+        Sensor-update thresholds (0 = every step).
+    """
+
+    def __init__(
+        self,
+        filter: ParticleFilter,
+        odom_start: np.ndarray | None = None,
+        *,
+        update_min_d_m: float = 0.0,
+        update_min_a_rad: float = 0.0,
+    ) -> None:
+        self.filter = filter
+        self.update_min_d_m = float(update_min_d_m)
+        self.update_min_a_rad = float(update_min_a_rad)
+        self._odom_prev = None if odom_start is None else np.asarray(odom_start, float).copy()
+        self._odom_at_update = np.full(3, np.nan)  # nan: update at the first scan
+
+    def step(self, odom: np.ndarray, ranges: np.ndarray, ignore: np.ndarray | None = None):
+        """Predict to the odometry pose ``odom`` ``(3,)``, weigh by ``ranges`` ``(B,)`` (beams in
+        ``ignore`` not scored) if moved enough; returns the :class:`PoseEstimate`."""
+        odom = np.asarray(odom, float)
+        pf = self.filter
+        if self._odom_prev is not None:
+            pf.predict(self._odom_prev, odom)
+        last = self._odom_at_update
+        moved = np.isnan(last[0]) or (
+            np.hypot(*(odom[:2] - last[:2])) >= self.update_min_d_m
+            or abs(wrap_angle(odom[2] - last[2])) >= self.update_min_a_rad
+        )
+        if moved:
+            pf.update(ranges, ignore)
+            self._odom_at_update = odom.copy()
+        self._odom_prev = odom.copy()
+        return pf.estimate()
+
+
+class FleetLocalizer:
+    """AMCL for every skid of a fleet: one :class:`RobotLocalizer` per skid, fed with what the
+    skids report (odometry and scans), and the fleet's knowledge of where the skids are used
+    to mask the beams that hit each other.
 
     Parameters
     ----------
@@ -45,16 +91,17 @@ class FleetLocalizer:
     spec
         The scanner (the same on every skid).
     start_poses
-        ``(N, 3)`` true start poses (the odometry starts there).
+        ``(N, 3)`` initial poses in the map (the operator's initial pose estimate).
     rng
-        Generator; every skid's filter and the odometry get their own child stream.
+        Generator; every skid's filter gets its own child stream (child ``i`` for skid ``i``).
     config
         Filter settings for all skids.
     initial_std
         Spread of the initial particle clouds around ``start_poses``; ``None`` starts every
         filter uniform over free space (global localization).
-    odometry
-        Drift model; ``None`` builds the default :class:`OdometryDrift`.
+    odom_start
+        ``(N, 3)`` the odometry poses the skids reported at the start (``None``: the first
+        :meth:`step` only records them).
     footprint, other_skid_margin_m
         With a footprint, beams that run into another skid's footprint at its current estimate
         (grown by the margin) are not scored: a neighbour a metre away hides a large part of
@@ -71,9 +118,10 @@ class FleetLocalizer:
     >>> g = OccupancyGrid(np.zeros((60, 80), bool), 0.1)
     >>> spec = LidarSpec(num_beams=360)
     >>> start = np.array([[2.0, 3.0, 0.0], [6.0, 3.0, np.pi]])
-    >>> loc = FleetLocalizer(LikelihoodField(g), spec, start, rng=np.random.default_rng(0))
-    >>> est = loc.step(start, scan(spec, start, g))
-    >>> bool(np.all(loc.errors(start)[0] < 0.1))
+    >>> loc = FleetLocalizer(LikelihoodField(g), spec, start, rng=np.random.default_rng(0),
+    ...                      odom_start=start)
+    >>> est = loc.step(start, scan(spec, start, g))  # odometry: the skids stood still
+    >>> bool(np.all(np.hypot(*(est[:, :2] - start[:, :2]).T) < 0.1))
     True
     """
 
@@ -86,7 +134,7 @@ class FleetLocalizer:
         rng: np.random.Generator,
         config: FilterConfig | None = None,
         initial_std: tuple[float, float, float] | None = (0.05, 0.05, np.radians(2.0)),
-        odometry: OdometryDrift | None = None,
+        odom_start: np.ndarray | None = None,
         update_min_d_m: float = 0.0,
         update_min_a_rad: float = 0.0,
         footprint: Footprint | None = None,
@@ -104,65 +152,60 @@ class FleetLocalizer:
                 pivot_from_rear_m=footprint.pivot + other_skid_margin_m,
             )
             self._grown_body = grown.corners_body()
-        streams = rng.spawn(n + 1)
-        if odometry is None:
-            # Imported here: the simulated odometry is the robot's sensor model (sim/), which
-            # itself uses this package's motion model.
-            from swarmpark.sim.odometry import OdometryDrift
-
-            odometry = OdometryDrift(start, rng=streams[n])
-        self.odometry = odometry
-        if self.odometry.odom.shape != start.shape:
-            raise ValueError(
-                f"fleet: odometry is for {len(self.odometry.odom)} skids, start_poses for {n}"
-            )
-        self.filters = [
-            ParticleFilter(
-                field,
-                spec,
-                config=config,
-                rng=streams[i],
-                initial_pose=None if initial_std is None else start[i],
-                initial_std=initial_std if initial_std is not None else (0.0, 0.0, 0.0),
+        if odom_start is not None:
+            odom_start = np.asarray(odom_start, dtype=float)
+            if odom_start.shape != start.shape:
+                raise ValueError(
+                    f"fleet: odom_start is {odom_start.shape}, start_poses {start.shape}"
+                )
+        streams = rng.spawn(n)
+        self.robots = [
+            RobotLocalizer(
+                ParticleFilter(
+                    field,
+                    spec,
+                    config=config,
+                    rng=streams[i],
+                    initial_pose=None if initial_std is None else start[i],
+                    initial_std=initial_std if initial_std is not None else (0.0, 0.0, 0.0),
+                ),
+                None if odom_start is None else odom_start[i],
+                update_min_d_m=update_min_d_m,
+                update_min_a_rad=update_min_a_rad,
             )
             for i in range(n)
         ]
-        self.update_min_d_m = float(update_min_d_m)
-        self.update_min_a_rad = float(update_min_a_rad)
-        self._odom_prev = self.odometry.odom.copy()
-        self._odom_at_update = np.full_like(start, np.nan)  # nan: update at the first scan
         self.estimates = start.copy() if initial_std is not None else np.full_like(start, np.nan)
         self.covariances = np.zeros((n, 3, 3))
 
+    @property
+    def filters(self) -> list[ParticleFilter]:
+        return [r.filter for r in self.robots]
+
     def step(
         self,
-        true_poses: np.ndarray,
+        odom: np.ndarray,
         ranges: np.ndarray,
         known_polygons: np.ndarray | None = None,
+        robots: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Advance all skids to ``true_poses`` ``(N, 3)`` with their scans ``(N, B)`` taken
-        there; returns the pose estimates ``(N, 3)`` (also kept in :attr:`estimates`).
+        """Localize the skids with their odometry poses ``odom`` ``(N, 3)`` and the scans
+        ``ranges`` ``(N, B)`` they took there; returns the pose estimates ``(N, 3)`` (also
+        kept in :attr:`estimates`).
 
-        ``known_polygons`` ``(P, K, 2)`` are obstacles whose place is known but which the map
-        lacks (skids outside this localizer, pallets placed by the operator); beams that run
-        into them (grown by the margin) are not scored, as for the fleet's own skids."""
-        odom = self.odometry.step(true_poses)
-        ranges = np.asarray(ranges, dtype=float).reshape(len(self.filters), -1)
+        ``robots`` limits the step to the skids with a new report (the others keep their
+        estimates and catch up with their odometry at their next report). ``known_polygons``
+        ``(P, K, 2)`` are obstacles whose place is known but which the map lacks (skids
+        outside this localizer, pallets placed by the operator); beams that run into them
+        (grown by the margin) are not scored, as for the fleet's own skids."""
+        odom = np.asarray(odom, dtype=float).reshape(len(self.robots), 3)
+        ranges = np.asarray(ranges, dtype=float).reshape(len(self.robots), -1)
         ignore = self.other_skid_beams(ranges, known_polygons)
-        for i, pf in enumerate(self.filters):
-            pf.predict(self._odom_prev[i], odom[i])
-            last = self._odom_at_update[i]
-            moved = np.isnan(last[0]) or (
-                np.hypot(*(odom[i, :2] - last[:2])) >= self.update_min_d_m
-                or abs(wrap_angle(odom[i, 2] - last[2])) >= self.update_min_a_rad
-            )
-            if moved:
-                pf.update(ranges[i], None if ignore is None else ignore[i])
-                self._odom_at_update[i] = odom[i]
-            est = pf.estimate()
+        todo = range(len(self.robots)) if robots is None else np.asarray(robots, dtype=int)
+        for i in todo:
+            est = self.robots[i].step(odom[i], ranges[i], None if ignore is None else ignore[i])
             self.estimates[i] = est.pose
             self.covariances[i] = est.cov
-        self._odom_prev = odom
         return self.estimates.copy()
 
     def other_skid_beams(
@@ -196,17 +239,6 @@ class FleetLocalizer:
         # noise, and known polygons are not grown) may come from it.
         with np.errstate(invalid="ignore"):
             return np.isfinite(reach) & ~(ranges < reach - self.other_skid_margin_m)
-
-    def kidnap(self, robots, true_poses: np.ndarray) -> None:
-        """Skids ``robots`` (index or indices) were carried to ``true_poses`` ``(k, 3)``; their
-        odometry does not notice (call before the next :meth:`step`)."""
-        self.odometry.kidnap(robots, true_poses)
-
-    def errors(self, true_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Position (m) and absolute yaw (rad) errors ``(N,)`` of the current estimates."""
-        t = np.asarray(true_poses, dtype=float).reshape(self.estimates.shape)
-        pos = np.hypot(self.estimates[:, 0] - t[:, 0], self.estimates[:, 1] - t[:, 1])
-        return pos, np.abs(wrap_angle(self.estimates[:, 2] - t[:, 2]))
 
 
 def pose_error_summary(estimates: np.ndarray, truth: np.ndarray) -> dict[str, float]:

@@ -1,4 +1,9 @@
-"""Operator commands: park (and its preview), goto, stop, resume, e-stop, teleop, release.
+"""Operator commands: park (and its preview), goto, formation, stop, resume, e-stop, teleop,
+release.
+
+The routes of park, goto, formation, stop, estop and resume are generated from the command
+registry (:data:`swarmpark.supervisor.registry.COMMANDS`: body schema, handler, summary);
+the park preview, teleop and release are written here (the session keeps a teleop alive).
 
 Every command is validated twice: the request schema (unknown keys and bad values are a 422
 naming the field), then the supervisor (a command it cannot carry out is refused with the
@@ -7,6 +12,8 @@ Accepted commands answer 200 with ``accepted: true``.
 """
 
 from __future__ import annotations
+
+import inspect
 
 import numpy as np
 from fastapi import APIRouter, Depends
@@ -17,14 +24,13 @@ from swarmpark.server.deps import SessionDep, require_control
 from swarmpark.server.frames import jsonable
 from swarmpark.server.schemas import (
     CommandResult,
-    GotoRequest,
     ParkRequest,
     PreviewResult,
     ReleaseRequest,
-    RobotsRequest,
     TeleopRequest,
 )
 from swarmpark.supervisor.core import Outcome
+from swarmpark.supervisor.registry import COMMANDS, CommandDef
 
 __all__ = ["router"]
 
@@ -41,20 +47,36 @@ def _answer(out: Outcome):
     return JSONResponse(status_code=409, content=body.model_dump())
 
 
-@router.post(
-    "/park",
-    response_model=CommandResult,
-    responses={**REFUSED, **NEEDS_TOKEN},
-    dependencies=[Depends(require_control)],
-    summary="Park robots inside a boundary",
-)
-async def park(cmd: ParkRequest, session: SessionDep):
-    """Lay out goals inside ``boundary`` with ``method`` and send the robots there.
+def _endpoint(spec: CommandDef):
+    """``POST /api/<name>`` for a registered command: the body is ``spec.request`` (none for
+    the e-stop) and the supervisor carries it out through the registry."""
 
-    All or nothing: if the skids do not fit, a robot is unknown or under teleop, the command
-    is refused (409) with the reason and no robot's orders change.
-    """
-    return _answer(session.command(session.sup.park(cmd)))
+    async def endpoint(session, req=None):
+        return _answer(session.command(session.sup.command(spec.name, req)))
+
+    params = [inspect.Parameter("session", inspect.Parameter.KEYWORD_ONLY, annotation=SessionDep)]
+    if spec.request is not None:
+        params.append(
+            inspect.Parameter("req", inspect.Parameter.KEYWORD_ONLY, annotation=spec.request)
+        )
+    endpoint.__signature__ = inspect.Signature(params)  # what FastAPI reads the body from
+    endpoint.__name__ = spec.name
+    endpoint.__doc__ = spec.doc or None
+    return endpoint
+
+
+for _spec in (e.item for e in COMMANDS.entries()):
+    if _spec.route:
+        router.add_api_route(
+            f"/{_spec.name}",
+            _endpoint(_spec),
+            methods=["POST"],
+            response_model=CommandResult,
+            responses={**REFUSED, **NEEDS_TOKEN} if _spec.needs_token else {},
+            dependencies=[Depends(require_control)] if _spec.needs_token else [],
+            summary=_spec.summary,
+            description=_spec.doc or None,
+        )
 
 
 @router.post(
@@ -82,51 +104,6 @@ async def park_preview(cmd: ParkRequest, session: SessionDep):
         fill_order=[int(k) for k in lay.fill_order],
         report=jsonable(dict(lay.report)),
     )
-
-
-@router.post(
-    "/goto",
-    response_model=CommandResult,
-    responses={**REFUSED, **NEEDS_TOKEN},
-    dependencies=[Depends(require_control)],
-    summary="Send one robot to a pose (also a new goal while it moves)",
-)
-async def goto(cmd: GotoRequest, session: SessionDep):
-    """``pose`` is ``[x_m, y_m, heading_deg]``. The robot leaves any park group it was in."""
-    return _answer(session.command(session.sup.goto(cmd)))
-
-
-@router.post(
-    "/stop",
-    response_model=CommandResult,
-    responses={**REFUSED, **NEEDS_TOKEN},
-    dependencies=[Depends(require_control)],
-    summary="Stop robots (they keep their goals; resume them later)",
-)
-async def stop(req: RobotsRequest, session: SessionDep):
-    return _answer(session.command(session.sup.stop(req.robots)))
-
-
-@router.post(
-    "/resume",
-    response_model=CommandResult,
-    responses={**REFUSED, **NEEDS_TOKEN},
-    dependencies=[Depends(require_control)],
-    summary="Resume stopped robots; 'all' also releases the e-stop",
-)
-async def resume(req: RobotsRequest, session: SessionDep):
-    return _answer(session.command(session.sup.resume(req.robots)))
-
-
-@router.post(
-    "/estop",
-    response_model=CommandResult,
-    summary="Emergency stop: every robot halts at the next tick (latched)",
-)
-async def estop(session: SessionDep):
-    """Needs no token, on purpose: like the red button on every console, any viewer may stop
-    the swarm. Releasing it (``POST /api/resume`` with ``"all"``) needs the token."""
-    return _answer(session.command(session.sup.estop()))
 
 
 @router.post(

@@ -1,0 +1,380 @@
+"""Operator commands: park, goto, formation, stop, e-stop, resume, teleop and release.
+
+The handlers of the command registry (:mod:`swarmpark.supervisor.registry`), as a mixin of
+:class:`~swarmpark.supervisor.core.Supervisor`. Commands are validated before anything
+changes: a refused command returns an :class:`Outcome` with the reason and the swarm keeps
+its previous orders. Also here: the parking groups' assignment, re-run every tick with
+hysteresis (2018 Algorithm 2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+from shapely.geometry import Point, Polygon
+from shapely.ops import nearest_points, unary_union
+
+from swarmpark import assign as assign_mod
+from swarmpark.core.geometry import GeometryError, as_simple_polygon
+from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors, lower_bound_s
+from swarmpark.supervisor.registry import COMMANDS
+from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
+
+__all__ = ["CommandsMixin", "Outcome", "ParkGroup", "FORMATION_GRACE_S"]
+
+#: A formation group keeps tracking its plan this long after the plan ends, then the
+#: navigation stack docks each skid exactly.
+FORMATION_GRACE_S = 3.0
+
+
+@dataclass(frozen=True)
+class Outcome:
+    accepted: bool
+    command: str
+    reason: str = ""
+    t_s: float = 0.0
+    detail: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {
+            "accepted": self.accepted,
+            "command": self.command,
+            "reason": self.reason,
+            "t_s": round(self.t_s, 3),
+            **({"detail": self.detail} if self.detail else {}),
+        }
+
+
+@dataclass
+class ParkGroup:
+    """Robots parked together: their goals, the cost, and the current assignment."""
+
+    robots: np.ndarray  # robot indices
+    goals: np.ndarray  # (G, 3)
+    cost: str
+    goal_of: np.ndarray  # goal index per robot in `robots`
+    fill_order: tuple[int, ...]
+    boundary: Polygon
+    method: str
+    report: dict
+    #: (length, width) of the footprint each goal was laid out for.
+    goal_dims: tuple[tuple[float, float], ...] = ()
+    #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
+    blocks: tuple[tuple[int, ...], ...] = ()
+    switches: int = 0
+
+
+class CommandsMixin:
+    """Command handlers of the supervisor (state lives in :class:`Supervisor`)."""
+
+    def _refuse(self, command: str, reason: str) -> Outcome:
+        out = Outcome(False, command, reason, self.t)
+        self.outcomes.append(out)
+        return out
+
+    def _accept(self, command: str, **detail) -> Outcome:
+        out = Outcome(True, command, "", self.t, detail)
+        self.outcomes.append(out)
+        return out
+
+    def _robot_indices(self, names, command: str) -> np.ndarray | str:
+        if names == "all":
+            return np.arange(self.n)
+        bad = [r for r in names if r not in self.index]
+        if bad:
+            return f"{command}: unknown robot {bad[0]!r}"
+        return np.array([self.index[r] for r in names], dtype=int)
+
+    def command(self, name: str, payload: Any = None) -> Outcome:
+        """Carry out the operator command ``name`` (see :data:`~swarmpark.supervisor.registry.COMMANDS`)
+        with its payload; a name nobody registered is refused with the known ones."""
+        if name not in COMMANDS:
+            return self._refuse(str(name), str(COMMANDS.error(name)))
+        spec = COMMANDS.get(name)
+        if isinstance(payload, dict) and spec.request is not None:
+            # A plain mapping (a message from a topic, a script) is checked against the
+            # command's schema first, as the API checks its bodies.
+            try:
+                payload = spec.request.model_validate(payload)
+            except ValidationError as exc:
+                err = exc.errors()[0]
+                where = ".".join(str(x) for x in err["loc"])
+                return self._refuse(name, f"{name}.{where}: {err['msg']}")
+        return spec.handler(self, payload)
+
+    def execute(self, cmd: CommandSpec) -> Outcome:
+        """Carry out one scenario command (the union form of the scenario schema)."""
+        kind = cmd.kind
+        return self.command(kind, getattr(cmd, kind))
+
+    def plan_layout(self, cmd: ParkCmd):
+        """The layout a park command would produce (for previews); raises ValueError."""
+        from swarmpark.layout import layout
+
+        idx = self._robot_indices(cmd.robots, "park.robots")
+        if isinstance(idx, str):
+            raise ValueError(idx)
+        if len(set(cmd.robots)) != len(cmd.robots):
+            raise ValueError(f"park.robots: robot listed twice in {list(cmd.robots)}")
+        boundary = as_simple_polygon(cmd.boundary, "park.boundary")
+        heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
+        fps = [self.info.footprints[i] for i in idx]
+        # The skids enter from their side: the opening is the boundary point nearest to them.
+        centroid = Point(self.poses_known[idx, :2].mean(axis=0))
+        opening = nearest_points(boundary.exterior, centroid)[0]
+        lay = layout(
+            boundary,
+            fps,
+            heading=heading,
+            method=cmd.method,
+            margin_m=cmd.margin_m,
+            obstacles=self._known_solids(boundary),
+            opening=(opening.x, opening.y),
+        )
+        return idx, boundary, lay
+
+    def _known_solids(self, region: Polygon):
+        """Walls and static obstacles the operator knows of, within ``region``."""
+        parts = [p for p in self.world.wall_polygons if p.intersects(region)]
+        if not self.world.wall_polygons:
+            geom = self.world.grid.occupied_geometry(region)
+            if not geom.is_empty:
+                parts.append(geom)
+        parts += [p for p in self.world.static_obstacles if p.intersects(region)]
+        return unary_union(parts) if parts else None
+
+    def park(self, cmd: ParkCmd) -> Outcome:
+        """Lay out goals in the boundary and assign them to the robots (all or nothing)."""
+        try:
+            idx, boundary, lay = self.plan_layout(cmd)
+        except (ValueError, GeometryError) as exc:
+            return self._refuse("park", str(exc))
+        busy = [self.ids[i] for i in idx if self.teleop[i]]
+        if busy:
+            return self._refuse("park", f"park.robots: robot {busy[0]!r} is under teleop")
+        goals = np.asarray(lay.poses, float)
+        fps = [self.info.footprints[i] for i in idx]
+        fits = assign_mod.footprint_fits(
+            [(f.length_m, f.width_m) for f in fps], [(f.length_m, f.width_m) for f in fps]
+        )
+        cost = self._cost_matrix(idx, goals, cmd.assignment, fits)
+        try:
+            goal_of = assign_mod.assign(cost)
+        except assign_mod.AssignmentError as exc:
+            return self._refuse("park", str(exc))
+        # The command is good: drop these robots from other groups and from goto orders.
+        self._leave_groups(idx)
+        group = ParkGroup(
+            idx,
+            goals,
+            cmd.assignment,
+            goal_of,
+            tuple(lay.fill_order),
+            boundary,
+            lay.method,
+            dict(lay.report),
+            goal_dims=tuple((f.length_m, f.width_m) for f in fps),
+            blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
+        )
+        self.groups.append(group)
+        self._set_goals(idx, goals[goal_of])
+        if self.metrics.lower_bound is None:
+            self.metrics.lower_bound = lower_bound_s(
+                self.world.grid,
+                self.truth_poses()[idx],
+                goals,
+                min(f.width_m for f in fps) / 2,
+                self.info.max_speed_mps[idx],
+            )
+        return self._accept(
+            "park",
+            robots=[self.ids[i] for i in idx],
+            method=lay.method,
+            goals=np.round(goals[goal_of], 4).tolist(),
+        )
+
+    def _cost_matrix(self, idx: np.ndarray, goals: np.ndarray, cost: str, fits) -> np.ndarray:
+        lengths = None
+        if cost == "path":
+            lengths = self.controller_path_lengths(idx, goals)
+        return assign_mod.cost_matrix(
+            self.poses_known[idx, :2], goals[:, :2], cost, path_lengths=lengths, fits=fits
+        )
+
+    def controller_path_lengths(self, idx: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Free-space path lengths robot -> goal ``(R, G)`` (one Dijkstra per goal)."""
+        from swarmpark.plan.grid import build_costmap, path_length_matrix
+
+        widths = [self.info.footprints[i].width_m for i in idx]
+        cm = build_costmap(self.world.grid, min(widths) / 2, min(widths) / 2)
+        return path_length_matrix(cm, self.poses_known[idx, :2], goals[:, :2])
+
+    def goto(self, cmd: GotoCmd) -> Outcome:
+        if cmd.robot not in self.index:
+            return self._refuse("goto", f"goto.robot: unknown robot {cmd.robot!r}")
+        i = self.index[cmd.robot]
+        if self.teleop[i]:
+            return self._refuse("goto", f"goto.robot: robot {cmd.robot!r} is under teleop")
+        goal = np.array([cmd.pose[0], cmd.pose[1], np.deg2rad(cmd.pose[2])])
+        reason = self._goal_reachability(i, goal)
+        if reason:
+            return self._refuse("goto", reason)
+        self._leave_groups(np.array([i]))
+        if cmd.priority is not None:
+            self.priority[i] = cmd.priority
+        self._set_goals(np.array([i]), goal[None])
+        return self._accept("goto", robot=cmd.robot, pose=np.round(goal, 4).tolist())
+
+    def _goal_reachability(self, i: int, goal: np.ndarray) -> str:
+        """Reason a goal pose cannot be taken (footprint in a wall or off the map), or ''."""
+        from swarmpark.core.geometry import convex_gap, footprint_corners
+
+        corners = footprint_corners(goal[None], self._corners_body[i : i + 1])
+        pieces = self._static_pieces
+        gap = convex_gap(np.repeat(corners, len(pieces), axis=0), pieces)
+        if np.any(gap < 0):
+            owner = self._static_owner[int(np.argmin(gap))]
+            return (
+                f"goto.pose: robot {self.ids[i]!r} would overlap {owner.replace(':', ' ')} at "
+                f"{[round(float(goal[0]), 3), round(float(goal[1]), 3), round(float(np.rad2deg(goal[2])), 1)]}"
+            )
+        return ""
+
+    def formation(self, cmd) -> Outcome:
+        """Move a group along paths holding a formation (Liu, Sun, Zhu 2010); the group is
+        handed back to the navigation stack for the final docking when the plan ends."""
+        from swarmpark.control.formation.run import FormationError, FormationRun
+
+        idx = self._robot_indices(cmd.robots, "formation.robots")
+        if isinstance(idx, str):
+            return self._refuse("formation", idx)
+        busy = [self.ids[i] for i in idx if self.teleop[i]]
+        if busy:
+            return self._refuse("formation", f"formation.robots: robot {busy[0]!r} is under teleop")
+        try:
+            run = FormationRun.start(
+                idx,
+                self.poses_known[idx],
+                [self.info.footprints[i] for i in idx],
+                self.info.max_speed_mps[idx],
+                self.info.max_accel_mps2[idx],
+                cmd,
+                self.t,
+            )
+        except (ValueError, FormationError) as exc:
+            return self._refuse("formation", str(exc))
+        self._leave_groups(idx)
+        self.formations.append(run)
+        self._set_goals(idx, run.goals)
+        return self._accept(
+            "formation",
+            robots=[self.ids[i] for i in idx],
+            plan_duration_s=round(float(run.adjuster.plan.duration_s), 3),
+        )
+
+    def _formation_mask(self) -> np.ndarray:
+        """Robots currently driven by a formation plan (until it ends, plus a grace time)."""
+        mask = np.zeros(self.n, dtype=bool)
+        for f in self.formations:
+            if self.t - f.t0 <= f.adjuster.plan.duration_s + FORMATION_GRACE_S:
+                mask[f.idx] = True
+        return mask
+
+    def stop(self, names) -> Outcome:
+        idx = self._robot_indices(names, "stop")
+        if isinstance(idx, str):
+            return self._refuse("stop", idx)
+        self.stopped[idx] = True
+        return self._accept("stop", robots=[self.ids[i] for i in idx])
+
+    def estop(self) -> Outcome:
+        self.estopped = True
+        return self._accept("estop")
+
+    def resume(self, names) -> Outcome:
+        idx = self._robot_indices(names, "resume")
+        if isinstance(idx, str):
+            return self._refuse("resume", idx)
+        if names != "all" and self.estopped:
+            return self._refuse(
+                "resume", "resume: the e-stop is latched; resume 'all' to release it"
+            )
+        if names == "all":
+            self.estopped = False
+        self.stopped[idx] = False
+        return self._accept("resume", robots=[self.ids[i] for i in idx])
+
+    def set_teleop(self, robot: str, v: float, omega: float) -> Outcome:
+        """Take over one robot with a velocity command (hand it back with :meth:`release`)."""
+        if robot not in self.index:
+            return self._refuse("teleop", f"teleop.robot: unknown robot {robot!r}")
+        if not (np.isfinite(v) and np.isfinite(omega)):
+            return self._refuse("teleop", f"teleop: v and omega must be finite (got {v}, {omega})")
+        i = self.index[robot]
+        taking_over = not self.teleop[i]
+        self.teleop[i] = True
+        self._teleop_cmd[i] = (v, omega)
+        self._teleop_t[i] = self.t
+        if taking_over:  # log the take-over, not every joystick update
+            return self._accept("teleop", robot=robot)
+        return Outcome(True, "teleop", "", self.t)
+
+    def release(self, robot: str) -> Outcome:
+        if robot not in self.index:
+            return self._refuse("release", f"release.robot: unknown robot {robot!r}")
+        i = self.index[robot]
+        self.teleop[i] = False
+        self._teleop_cmd[i] = 0.0
+        self.goal_changed[i] = True  # autonomy takes over from wherever the operator left it
+        return self._accept("release", robot=robot)
+
+    def _leave_groups(self, idx: np.ndarray) -> None:
+        self.formations = [f for f in self.formations if not np.isin(f.idx, idx).any()]
+        keep = []
+        for g in self.groups:
+            mask = ~np.isin(g.robots, idx)
+            if mask.all():
+                keep.append(g)
+            elif mask.any():
+                g.robots, g.goal_of = g.robots[mask], g.goal_of[mask]
+                keep.append(g)
+        self.groups = keep
+
+    def _set_goals(self, idx: np.ndarray, goals: np.ndarray) -> None:
+        changed = ~self.has_goal[idx] | np.any(np.abs(self.goals[idx] - goals) > 1e-9, axis=1)
+        self.goals[idx] = goals
+        self.has_goal[idx] = True
+        self.goal_changed[idx[changed]] = True
+        if changed.any():
+            self.metrics.on_goal(self.t, idx[changed], goals[changed])
+
+    def _reassign(self) -> None:
+        """Re-run each parking group's assignment (2018 Algorithm 2), with hysteresis."""
+        for g in self.groups:
+            if g.cost == "sequential" or len(g.robots) < 2:
+                continue
+            fps = [self.info.footprints[i] for i in g.robots]
+            fits = assign_mod.footprint_fits([(f.length_m, f.width_m) for f in fps], g.goal_dims)
+            if g.cost == "path":
+                continue  # path costs are recomputed on replans only (Dijkstra per goal)
+            cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
+            pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[g.goal_of])
+            locked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+            try:
+                new, changed = assign_mod.reassign(cost, g.goal_of, locked)
+            except assign_mod.AssignmentError:
+                continue
+            if changed:
+                g.switches += int(np.sum(new != g.goal_of))
+                g.goal_of = new
+                self._set_goals(g.robots, g.goals[new])
+
+    def hold_zones(self) -> list:
+        zones: list = [None] * self.n
+        for g in self.groups:
+            for r in g.robots:
+                zones[r] = g.boundary
+        return zones

@@ -1,0 +1,354 @@
+"""The supervisor behind the RobotLink seam: a scripted fake link parks robots without the
+simulator; the fill order on a hand-made dead end; the command registry; the inbox and the
+simulator link's injected faults."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import make_world
+from shapely.geometry import box
+
+from swarmpark.core.geometry import Footprint, integrate_unicycle
+from swarmpark.core.gridmap import grid_from_walls
+from swarmpark.links.base import (
+    FleetInfo,
+    Inbox,
+    Odometry,
+    PoseReport,
+    RobotLink,
+    Scan,
+    VelocityCommand,
+)
+from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
+from swarmpark.sim.link import CMD_TIMEOUT_S, SimLink
+from swarmpark.supervisor import fill_order
+from swarmpark.supervisor.commands import ParkGroup
+from swarmpark.supervisor.core import Supervisor
+from swarmpark.supervisor.registry import COMMANDS
+from swarmpark.world.scenario import ParkCmd, ScenarioError
+
+THREE = [
+    {"id": "a", "pose": [1.5, 1.0, 0.0]},
+    {"id": "b", "pose": [1.5, 3.0, 0.0]},
+    {"id": "c", "pose": [1.5, 5.0, 0.0]},
+]
+
+
+class FakeLink:
+    """A scripted fleet: robots that follow their last command exactly (no simulator, no
+    contacts, no limits but the speeds), report their pose every period and nothing else."""
+
+    def __init__(self, ids, starts, dt=0.05):
+        self.ids = tuple(ids)
+        self.poses = np.asarray(starts, float).copy()
+        self.vel = np.zeros((len(ids), 2))
+        self.cmd = np.zeros((len(ids), 2))
+        self.dt = dt
+        self.t = 0.0
+        self.out: list = []
+        self.stops = 0
+
+    def connect(self) -> FleetInfo:
+        n = len(self.ids)
+        self._report()
+        return FleetInfo(
+            ids=self.ids,
+            footprints=tuple(Footprint(1.2, 0.8, 0.6) for _ in range(n)),
+            max_speed_mps=np.full(n, 0.5),
+            max_yaw_rate_radps=np.full(n, 1.0),
+            max_accel_mps2=np.full(n, 0.5),
+            max_yaw_accel_radps2=np.full(n, 2.0),
+            dt_s=self.dt,
+            start_poses=self.poses.copy(),
+        )
+
+    def now(self) -> float:
+        return self.t
+
+    def receive(self):
+        out, self.out = self.out, []
+        return out
+
+    def send(self, commands):
+        for c in commands:
+            self.cmd[self.ids.index(c.robot)] = (c.v, c.omega)
+
+    def stop(self, robots):
+        self.stops += 1
+        for r in robots:
+            self.cmd[self.ids.index(r)] = 0.0
+
+    def spin(self):
+        v = np.clip(self.cmd[:, 0], -0.5, 0.5)
+        w = np.clip(self.cmd[:, 1], -1.0, 1.0)
+        self.poses = integrate_unicycle(self.poses, v, w, self.dt)
+        self.vel = np.column_stack([v, w])
+        self.t = round(self.t + self.dt, 9)
+        self._report()
+        return None
+
+    def _report(self):
+        for i, rid in enumerate(self.ids):
+            self.out.append(PoseReport(rid, self.t, self.poses[i].copy()))
+            self.out.append(Odometry(rid, self.t, self.poses[i].copy(), self.vel[i].copy()))
+
+
+def test_the_fake_link_is_a_robot_link_and_the_supervisor_parks_through_it():
+    world = make_world(robots=THREE, duration_s=90, map={"size_m": [12, 7], "resolution_m": 0.05})
+    link = FakeLink(world.ids, [r.start for r in world.robots], dt=world.scenario.dt_s)
+    assert isinstance(link, RobotLink)
+    sup = Supervisor(world, link=link)
+    assert sup.sim is None  # nothing but the link: no truth handle
+    out = sup.park(
+        ParkCmd(robots=["a", "b", "c"], boundary=[[7, 0.5], [11, 0.5], [11, 6.5], [7, 6.5]])
+    )
+    assert out.accepted, out.reason
+    for _ in range(int(90 / link.dt)):
+        sup.tick()
+        if sup.settled():
+            break
+    pos, head = goal_errors(link.poses, sup.goals)
+    assert np.all(pos <= POSITION_TOL_M) and np.all(head <= HEADING_TOL_RAD), (pos, head)
+    assert sup.modes() == ["parked"] * 3
+    assert sup.t < 90
+    # The supervisor read the robots' poses from the link only.
+    assert np.allclose(sup.poses_known, link.poses)
+
+
+def test_estop_reaches_the_link_as_a_stop():
+    world = make_world(robots=THREE[:1])
+    link = FakeLink(world.ids, [r.start for r in world.robots])
+    sup = Supervisor(world, link=link)
+    sup.estop()
+    sup.tick()
+    assert link.stops == 1
+
+
+# ----------------------------------------------------------------------------- fill order
+
+
+def _dead_end():
+    """A 1.2 m wide corridor open to the west, closed at x = 6 m, with three goals along it."""
+    walls = [box(0, 0, 8, 2.0), box(0, 3.2, 8, 5), box(6.0, 2.0, 8, 3.2)]
+    grid = grid_from_walls((8.0, 5.0), 0.05, walls)
+    fps = [Footprint(1.0, 0.6, 0.5)] * 3
+    goals = np.array([[5.3, 2.6, 0.0], [4.1, 2.6, 0.0], [2.9, 2.6, 0.0]])  # deepest first
+    boundary = box(2.3, 2.0, 6.0, 3.2)
+    return grid, fps, goals, boundary
+
+
+def test_blockers_of_a_dead_end_are_the_goals_deeper_in():
+    grid, fps, goals, boundary = _dead_end()
+    blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
+    # The goal at the mouth walls in both deeper ones; the middle one the deepest; the
+    # deepest blocks nothing.
+    assert blocks == ((), (0,), (0, 1))
+
+
+def test_fill_order_holds_a_skid_that_would_overtake_the_one_bound_deeper():
+    grid, fps, goals, boundary = _dead_end()
+    blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
+    group = ParkGroup(
+        robots=np.array([0, 1, 2]),
+        goals=goals,
+        cost="euclidean",
+        goal_of=np.array([0, 1, 2]),
+        fill_order=(0, 1, 2),
+        boundary=boundary,
+        method="stacking",
+        report={},
+        blocks=blocks,
+    )
+    # Robot 0 (deepest goal) is far behind; robots 1 and 2 are nearer their goals: held.
+    poses = np.array([[-3.0, 2.6, 0.0], [1.0, 2.6, 0.0], [2.0, 2.6, 0.0]])
+    assert fill_order.held([group], poses).tolist() == [False, True, True]
+    # Once robot 0 is ahead of robot 1 (nearer its goal), robot 1 may follow; 2 still waits.
+    poses[0] = [4.0, 2.6, 0.0]
+    assert fill_order.held([group], poses).tolist() == [False, False, True]
+    # Both deeper goals filled: the mouth is free to take.
+    poses[:2] = goals[:2]
+    assert fill_order.held([group], poses).tolist() == [False, False, False]
+
+
+# ----------------------------------------------------------------------------- commands
+
+
+def test_an_unknown_command_is_refused_with_the_known_ones():
+    sup = Supervisor(make_world())
+    before = (sup.goals.copy(), sup.stopped.copy(), sup.estopped)
+    out = sup.command("dance", {"robots": "all"})
+    assert not out.accepted
+    assert out.command == "dance"
+    assert "unknown command 'dance'" in out.reason
+    for name in ("park", "goto", "formation", "stop", "estop", "resume"):
+        assert name in out.reason
+    assert np.array_equal(sup.goals, before[0]) and sup.estopped == before[2]
+    assert sup.outcomes[-1] is out
+
+
+def test_a_command_given_as_a_mapping_is_checked_against_its_schema():
+    sup = Supervisor(make_world())
+    out = sup.command("goto", {"robot": "a", "pose": [4.0, 3.0, 90.0]})
+    assert out.accepted, out.reason
+    assert sup.goals[0] == pytest.approx([4.0, 3.0, np.pi / 2])
+    bad = sup.command("goto", {"robot": "a"})
+    assert not bad.accepted and bad.reason.startswith("goto.pose: Field required")
+    assert sup.goals[0] == pytest.approx([4.0, 3.0, np.pi / 2])  # orders unchanged
+
+
+def test_a_link_to_other_robots_is_refused():
+    world = make_world()
+    with pytest.raises(ValueError, match=r"link: robots \['zz'\] differ from the scenario's"):
+        Supervisor(world, link=FakeLink(["zz"], [[1.0, 1.0, 0.0]]))
+
+
+def test_the_registry_runs_every_scenario_command():
+    assert COMMANDS.names()[:6] == ("park", "goto", "formation", "stop", "estop", "resume")
+    sup = Supervisor(make_world())
+    assert sup.command("stop", ["a"]).accepted and sup.stopped[0]
+    assert sup.command("resume", "all").accepted and not sup.stopped[0]
+    assert sup.command("estop").accepted and sup.estopped
+
+
+# ----------------------------------------------------------------------------- inbox
+
+
+def test_inbox_keeps_the_newest_message_whatever_the_arrival_order():
+    box_ = Inbox(("a", "b"))
+    box_.absorb(
+        [
+            Odometry("a", 2.0, np.array([2.0, 0, 0]), np.zeros(2)),
+            Odometry("a", 1.0, np.array([1.0, 0, 0]), np.zeros(2)),  # late
+            Odometry("a", 2.0, np.array([9.0, 0, 0]), np.zeros(2)),  # duplicate stamp
+            Odometry("zz", 3.0, np.zeros(3), np.zeros(2)),  # not in this fleet
+            Scan("b", 0.5, np.ones(4)),
+        ]
+    )
+    assert box_.odom[0].tolist() == [2.0, 0.0, 0.0]
+    assert box_.ignored == 3
+    assert box_.last_seen.tolist() == [2.0, 0.5]
+    assert box_.take_scans().tolist() == [1] and box_.take_scans().tolist() == []
+    assert box_.age(3.0)[0] == pytest.approx(1.0)
+
+
+# ----------------------------------------------------------------------------- faults
+
+
+def _faulty(faults, **kw):
+    return make_world(
+        robots=[{"id": "a", "pose": [2.0, 3.0, 0.0]}, {"id": "b", "pose": [5.0, 3.0, 0.0]}],
+        faults=faults,
+        **kw,
+    )
+
+
+def _spin(link, until_s, cmd=(0.2, 0.0)):
+    """Drive both robots with ``cmd`` until ``until_s``; yields the time and the messages
+    received after each step."""
+    while link.now() < until_s - 1e-9:
+        link.send([VelocityCommand(r, link.now(), *cmd) for r in link.ids])
+        link.spin()
+        yield link.now(), link.receive()
+
+
+def test_dropped_messages_leave_no_fresh_odometry_in_the_window():
+    link = SimLink(_faulty([{"robot": "a", "from_s": 1.0, "to_s": 2.0, "drop": True}]))
+    link.connect()
+    box_ = Inbox(link.ids)
+    box_.absorb(link.receive())  # the reports at connect
+    age_a = {}
+    for t, msgs in _spin(link, 3.0):
+        box_.absorb(msgs)
+        age_a[round(t, 2)] = box_.age(t)[0]
+        stamps = {m.stamp for m in msgs if isinstance(m, Odometry) and m.robot == "a"}
+        if 1.0 <= t < 2.0 - 1e-9:
+            assert not stamps  # robot a is silent
+        else:
+            assert stamps == {t}
+        assert any(isinstance(m, Odometry) and m.robot == "b" for m in msgs)
+    # Its last odometry is from just before the window, and it is fresh again after it.
+    assert age_a[1.95] == pytest.approx(1.0)
+    assert age_a[2.0] == 0.0
+    # Commands were lost too: a kept its last one for its dead-man time, then stopped.
+    assert link.sim.vel[0, 0] == pytest.approx(0.2)  # moving again after the window
+    v_a = {}
+    link2 = SimLink(_faulty([{"robot": "a", "from_s": 1.0, "to_s": 2.0, "drop": True}]))
+    link2.connect()
+    for t, _ in _spin(link2, 1.99):
+        v_a[round(t, 2)] = link2.sim.vel[:, 0].copy()
+    # The last command that got through was sent at 0.95 s; it holds until 0.95 + 0.5 s.
+    assert v_a[0.95 + CMD_TIMEOUT_S][0] == pytest.approx(0.2)
+    assert v_a[1.55][0] < 0.2 and v_a[1.95][0] == 0.0  # decelerating, then stopped
+    assert v_a[1.95][1] == pytest.approx(0.2)  # the other robot never noticed
+
+
+def test_delayed_messages_arrive_late_and_stale_ones_are_ignored():
+    link = SimLink(_faulty([{"robot": "a", "from_s": 1.0, "to_s": 1.5, "delay_s": 0.3}]))
+    link.connect()
+    box_ = Inbox(link.ids)
+    lags = []
+    for t, msgs in _spin(link, 2.5):
+        lags += [t - m.stamp for m in msgs if isinstance(m, Odometry) and m.robot == "a"]
+        box_.absorb(msgs)
+        # The inbox never goes back in time.
+        assert box_.odom_stamp[0] <= t
+    assert max(lags) == pytest.approx(0.3, abs=1e-6)
+    assert box_.ignored > 0  # late messages that arrived after newer ones
+    assert box_.odom_stamp[0] == pytest.approx(2.5)
+
+
+def test_noise_fault_perturbs_reported_poses_only():
+    clean = SimLink(_faulty([]))
+    noisy = SimLink(_faulty([{"robot": "a", "from_s": 0.0, "to_s": 5.0, "noise_m": 0.1}]))
+    for link in (clean, noisy):
+        link.connect()
+        link.receive()
+    a = [m for _, ms in _spin(clean, 1.0) for m in ms if isinstance(m, PoseReport)]
+    b = [m for _, ms in _spin(noisy, 1.0) for m in ms if isinstance(m, PoseReport)]
+    err = [
+        np.hypot(*(x.pose[:2] - y.pose[:2])) for x, y in zip(a, b, strict=True) if x.robot == "a"
+    ]
+    same = [np.allclose(x.pose, y.pose) for x, y in zip(a, b, strict=True) if x.robot == "b"]
+    assert 0.03 < np.mean(err) < 0.3 and all(same)
+    assert np.allclose(clean.sim.poses, noisy.sim.poses)  # the robots themselves are untouched
+
+
+@pytest.mark.parametrize(
+    "fault, message",
+    [
+        ({"robot": "x", "from_s": 1, "to_s": 2, "drop": True}, r"faults\[0\].robot: unknown robot"),
+        ({"robot": "a", "from_s": 2, "to_s": 1, "drop": True}, r"faults\[0\]: to_s must be after"),
+        ({"robot": "a", "from_s": 1, "to_s": 2}, r"faults\[0\]: a fault needs drop"),
+        ({"robot": "a", "from_s": 1, "to_s": 2, "delay_s": -1}, r"faults\[0\].delay_s"),
+    ],
+)
+def test_bad_faults_are_refused_naming_the_field(fault, message):
+    with pytest.raises(ScenarioError, match=message):
+        _faulty([fault])
+
+
+def test_amcl_skips_a_silent_robot_and_catches_up_when_it_reports_again():
+    """Onboard localization runs per robot on what arrives: a robot whose messages are dropped
+    keeps its estimate, then its filter takes the whole odometry increment at once."""
+    world = make_world(
+        robots=[{"id": "a", "pose": [1.5, 1.5, 0.0]}, {"id": "b", "pose": [8.0, 4.5, 180.0]}],
+        sensing={"localization": "amcl", "lidar_beams": 120},
+        faults=[{"robot": "a", "from_s": 1.0, "to_s": 2.0, "drop": True}],
+        commands=[
+            {"goto": {"robot": "a", "pose": [6.0, 1.5, 0.0]}},
+            {"goto": {"robot": "b", "pose": [4.0, 4.5, 180.0]}},
+        ],
+    )
+    sup = Supervisor(world)
+    est = {}
+    while sup.t < 2.5 - 1e-9:
+        sup.tick()
+        est[round(sup.t, 2)] = sup.estimates.copy()
+    frozen = [est[t][0] for t in est if 1.0 <= t < 2.0 - 1e-9]
+    assert len(frozen) >= 19 and all(np.array_equal(frozen[0], e) for e in frozen)
+    assert est[1.95][1][0] < est[1.05][1][0] - 0.1  # b kept moving and localizing
+    # Back after the window: a's estimate jumps forward with the odometry it missed, and is
+    # where a really is.
+    assert est[2.0][0][0] - frozen[-1][0] > 0.1
+    assert np.hypot(*(sup.estimates[0, :2] - sup.sim.poses[0, :2])) < 0.1
