@@ -1,20 +1,36 @@
 """The served simulation: one supervisor, paced by real time, and the clients watching it.
 
-The core stays deterministic: :class:`Session` calls :meth:`Supervisor.tick` at fixed steps
-from one asyncio task; pacing, the speed factor and pause live here. API handlers are
-coroutines on the same event loop, so a command always lands *between* two ticks and no
-two pieces of code ever touch the supervisor at once (no threads).
+The core stays deterministic: :class:`Session` calls :meth:`Supervisor.tick` at fixed steps;
+pacing, the speed factor and pause live here.
+
+Threads (the event loop must never wait on the simulation):
+
+* **the sim thread** (one worker, :meth:`Session.on_sim`) owns the supervisor: ticks, frame
+  encoding and every command that changes orders run there, one after the other, so a
+  command still lands *between* two ticks and no two pieces of code change the supervisor at
+  once;
+* **the work pool** (:meth:`Session.off_loop`) runs heavy read-mostly work: layout previews,
+  the layout and planning of a park, loading and building a scenario; its result is applied
+  in the sim thread;
+* **the event loop** answers requests and feeds the viewers. The e-stop and per-robot stops
+  are applied from here at once (:meth:`Session.estop_now`): a latched flag and a hold on the
+  robot link, which the tick reads; nothing queues in front of them.
+
+A tick that raises stops every skid (link hold), pauses the session with :attr:`error`,
+raises an alarm and keeps the orders (goals, groups) for a resume after the fix.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 import logging
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,6 +60,13 @@ TICK_HISTORY = 200
 MIN_YIELD_S = 0.003
 #: Paced frames kept for GET /api/perf.
 PERF_HISTORY = 2000
+#: Alarms kept for the alarms panel (newest last).
+ALARM_HISTORY = 50
+#: Heavy work (previews, park plans, scenario loads) that may run at once, off the loop.
+WORK_THREADS = 2
+#: A viewer whose queue overflowed this many times in a row is disconnected (a slow link
+#: must not cost the others, or the simulation, anything).
+MAX_OVERFLOWS = 20
 
 
 @dataclass(eq=False)
@@ -53,6 +76,9 @@ class Client:
     queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
     needs_full: bool = True
     dropped: int = 0
+    #: Overflows since the last frame that went out whole; past :data:`MAX_OVERFLOWS` the
+    #: viewer is closed.
+    overflows: int = 0
 
     def offer(self, delta: str, full: str | None) -> None:
         msg = full if self.needs_full else delta
@@ -64,9 +90,12 @@ class Client:
                 self.queue.get_nowait()
                 self.dropped += 1
             self.needs_full = True
+            self.overflows += 1
             if full is None:
                 return
             msg = full
+        else:
+            self.overflows = 0
         self.queue.put_nowait(msg)
         if msg is full:
             self.needs_full = False
@@ -125,6 +154,14 @@ class Session:
         self._rate = 0.0
         self._tick_wall_ms = 0.0
         self._cpu_ms = 0.0
+        #: Alarms raised (failed ticks, contacts under teleop): ``{"t_s", "kind", "text"}``.
+        self.alarms: deque[dict] = deque(maxlen=ALARM_HISTORY)
+        self.alarm_seq = 0
+        #: Wall time (clock) each robot was released: a teleop request issued before the
+        #: release may still arrive after it and must not take the skid back.
+        self._released: dict[str, float] = {}
+        self._sim_pool: ThreadPoolExecutor | None = None
+        self._work_pool: ThreadPoolExecutor | None = None
         self.load(scenario_path, scripted=scripted)
 
     # ------------------------------------------------------------------ scenario
@@ -132,11 +169,19 @@ class Session:
     def load(self, path: str | Path, *, scripted: bool = True) -> None:
         """Load a scenario (raises :class:`~swarmpark.world.scenario.ScenarioError`, changing
         nothing, if it is bad)."""
+        self.install(*self.build(path, scripted=scripted))
+
+    @staticmethod
+    def build(path: str | Path, *, scripted: bool = True) -> tuple[Path, bool, World]:
+        """Read and build a scenario (no state touched: safe in the work pool)."""
         path = Path(path)
         scn = load_scenario(path)
         if not scripted:
             scn = scn.model_copy(update={"commands": []})
-        world = build_world(scn)
+        return path, scripted, build_world(scn)
+
+    def install(self, path: Path, scripted: bool, world: World) -> None:
+        """Serve a built world (in the sim thread, between ticks)."""
         self.path, self.scripted, self.world = path.resolve(), scripted, world
         self._start(world)
 
@@ -152,6 +197,7 @@ class Session:
         self.encoder = FrameEncoder(self.sup)
         self.rev += 1
         self.error = None
+        self._released = {}
         self._teleop: dict[str, tuple[float, float, float, float]] = {}
         self._budget_s = 0.0
         self._world_info = {"rev": self.rev, **self.describe(), **world_info(self.sup)}
@@ -174,7 +220,19 @@ class Session:
             o.on_end(sup, result)
 
     def alarm(self, entry: dict) -> None:
-        """Pass an alarm (e.g. a failed tick) to the observers that take them."""
+        """Raise an alarm (shown in the alarms panel) and pass it to the observers that take
+        them (e.g. a failed tick)."""
+        self.alarm_seq += 1
+        sup = getattr(self, "sup", None)
+        self.alarms.append(
+            {
+                "id": self.alarm_seq,
+                "t_s": round(sup.t, 3) if sup is not None else 0.0,
+                "kind": entry.get("kind", "alarm"),
+                "text": str(entry.get("error") or entry.get("text") or entry.get("kind")),
+                **({"robots": list(entry["robots"])} if "robots" in entry else {}),
+            }
+        )
         for o in self.observers:
             fn = getattr(o, "on_alarm", None)
             if fn is not None:
@@ -217,6 +275,20 @@ class Session:
         return outcome
 
     def teleop(self, robot: str, v: float, omega: float) -> Outcome:
+        released = self._released.get(robot)
+        if released is not None and self.clock() - released < TELEOP_DEADMAN_S:
+            # Release is final for commands issued before it: a request of the held stick
+            # still in flight when the operator let go must not take the skid back.
+            return self.command(
+                Outcome(
+                    False,
+                    "teleop",
+                    f"teleop.robot: robot {robot!r} was released "
+                    f"{self.clock() - released:.2f} s ago; take it over again after "
+                    f"{TELEOP_DEADMAN_S} s",
+                    self.sup.t,
+                )
+            )
         out = self.sup.set_teleop(robot, v, omega)
         if out.accepted:
             self._teleop[robot] = (v, omega, self.clock(), self.sup.t)
@@ -224,7 +296,57 @@ class Session:
 
     def release(self, robot: str) -> Outcome:
         self._teleop.pop(robot, None)
-        return self.command(self.sup.release(robot))
+        out = self.sup.release(robot)
+        if out.accepted:
+            self._released[robot] = self.clock()
+        return self.command(out)
+
+    def estop_now(self) -> Outcome:
+        """The e-stop, applied from any thread without waiting for the sim thread: the
+        latched flag (every later tick commands zero and holds) and a hold on the link for
+        every robot (the next step brakes them even if a tick is under way)."""
+        sup = self.sup
+        out = sup.estop()
+        with contextlib.suppress(Exception):  # the flag is set; the link is a second path
+            sup.link.stop(list(sup.ids))
+        self.encoder.metrics_now = True
+        return out
+
+    def stop_now(self, names) -> Outcome:
+        """Per-robot stop on the same unblocked path as the e-stop."""
+        sup = self.sup
+        out = sup.stop(names)
+        if out.accepted:
+            with contextlib.suppress(Exception):
+                sup.link.stop(list(out.detail.get("robots", [])))
+        self.encoder.metrics_now = True
+        return out
+
+    # ------------------------------------------------------------------ threads
+
+    def _sim_executor(self) -> ThreadPoolExecutor:
+        if self._sim_pool is None:
+            self._sim_pool = ThreadPoolExecutor(1, thread_name_prefix="swarmpark-sim")
+        return self._sim_pool
+
+    def _work_executor(self) -> ThreadPoolExecutor:
+        if self._work_pool is None:
+            self._work_pool = ThreadPoolExecutor(WORK_THREADS, thread_name_prefix="swarmpark-work")
+        return self._work_pool
+
+    async def on_sim(self, fn: Callable, *args, **kwargs):
+        """Run ``fn`` in the sim thread (between two ticks) and await its result."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(
+            self._sim_executor(), functools.partial(fn, *args, **kwargs)
+        )
+
+    async def off_loop(self, fn: Callable, *args, **kwargs):
+        """Run heavy ``fn`` in the work pool (neither the loop nor the ticks wait on it)."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(
+            self._work_executor(), functools.partial(fn, *args, **kwargs)
+        )
 
     def _keep_teleop_alive(self) -> None:
         """Re-send held teleop commands before the supervisor's own timeout (sim time) runs
@@ -263,9 +385,14 @@ class Session:
 
     def _fail(self, exc: Exception) -> None:
         # Keep serving: the operator must see what happened, and may still reset or load.
+        # The skids are held on the link (a paused simulation does not move them either,
+        # but a link to real robots would keep the last commands alive until their
+        # dead-man); goals and groups are kept for a resume.
         log.exception("simulation tick failed")
         self.error = f"simulation stopped: {type(exc).__name__}: {exc}"
         self.paused = True
+        with contextlib.suppress(Exception):
+            self.sup.link.stop(list(self.sup.ids))
         self.alarm({"kind": "tick-error", "error": self.error})
 
     def due(self, wall_elapsed_s: float) -> int:
@@ -306,7 +433,9 @@ class Session:
                 "rate": round(self._rate, 2),
                 "tick_ms": round(float(np.mean(ticks)), 2) if ticks else None,
                 "error": self.error,
+                "estop": bool(self.sup.estopped),
             },
+            "alarms": list(self.alarms)[-10:],
         }
 
     def snapshot(self) -> dict:
@@ -315,23 +444,32 @@ class Session:
         _, full = enc.frame(self.sim_extra(), want_delta=False, want_full=True)
         return full  # type: ignore[return-value]
 
+    def encode(self, want_full: bool) -> tuple[str, str | None]:
+        """One frame as JSON text (the delta, and the full frame if asked); strict JSON."""
+        t0, c0 = time.perf_counter(), time.process_time()
+        self.seq += 1
+        delta, full = self.encoder.frame(self.sim_extra(), want_full=want_full)
+        d_msg = json.dumps(delta, separators=(",", ":"), allow_nan=False)
+        f_msg = (
+            json.dumps(full, separators=(",", ":"), allow_nan=False) if full is not None else None
+        )
+        self.frame_ms.append((time.perf_counter() - t0) * 1e3)
+        self._cpu_ms += (time.process_time() - c0) * 1e3
+        return d_msg, f_msg
+
+    def offer(self, d_msg: str, f_msg: str | None) -> int:
+        """Queue an encoded frame to every viewer (on the loop); returns the delta's bytes."""
+        for c in list(self.clients):
+            c.offer(d_msg, f_msg)
+        self.last_message_bytes = len(d_msg)
+        self.frames_sent += 1
+        return len(d_msg)
+
     def broadcast(self) -> int:
         """Encode one frame and queue it to every client; returns the delta's size in bytes."""
         if not self.clients:
             return 0
-        t0, c0 = time.perf_counter(), time.process_time()
-        self.seq += 1
-        want_full = any(c.needs_full for c in self.clients)
-        delta, full = self.encoder.frame(self.sim_extra(), want_full=want_full)
-        d_msg = json.dumps(delta, separators=(",", ":"))
-        f_msg = json.dumps(full, separators=(",", ":")) if full is not None else None
-        for c in self.clients:
-            c.offer(d_msg, f_msg)
-        self.last_message_bytes = len(d_msg)
-        self.frames_sent += 1
-        self.frame_ms.append((time.perf_counter() - t0) * 1e3)
-        self._cpu_ms += (time.process_time() - c0) * 1e3
-        return len(d_msg)
+        return self.offer(*self.encode(any(c.needs_full for c in self.clients)))
 
     def perf_report(self, frames: int | None = None) -> dict:
         """Server load over the last ``frames`` (at most :data:`PERF_HISTORY`) paced frames."""
@@ -365,8 +503,39 @@ class Session:
 
     # ------------------------------------------------------------------ the pacing task
 
+    def _burst(self, n: int, period: float, want_frame: bool, want_full: bool):
+        """In the sim thread: up to ``n`` due ticks within one frame period, then the frame.
+
+        Returns ``(ticks run, delta message or None, full message or None)``."""
+        t_start = time.perf_counter()
+        self._tick_wall_ms = self._cpu_ms = 0.0
+        ran = 0
+        try:
+            for k in range(n):
+                if self.paused or self.error:
+                    break
+                if k and time.perf_counter() - t_start > period:
+                    # Ticks slower than real time: send a frame first and run the rest
+                    # later (the simulation falls behind, the view stays live).
+                    self._carry(n - k, 5 * period)
+                    break
+                self.tick()
+                ran += 1
+        except Exception as exc:
+            self._fail(exc)
+        d_msg = f_msg = None
+        if want_frame:
+            try:
+                d_msg, f_msg = self.encode(want_full)
+            except Exception as exc:  # a frame that cannot be sent must not stop the loop
+                self._fail(exc)
+        return ran, d_msg, f_msg
+
     async def run(self) -> None:
-        """Tick at the speed factor and broadcast at :data:`FRAME_HZ` until cancelled."""
+        """Tick at the speed factor and broadcast at :data:`FRAME_HZ` until cancelled.
+
+        The ticks and the frame run in the sim thread; this task only paces them and hands
+        the frames to the viewers, so requests are answered while a tick runs."""
         loop = asyncio.get_running_loop()
         period = 1.0 / FRAME_HZ
         last = loop.time()
@@ -375,31 +544,16 @@ class Session:
         while True:
             now = loop.time()
             elapsed, last = now - last, now
-            self._tick_wall_ms = self._cpu_ms = 0.0
-            ran = 0
             # After a stall (a laptop lid, a long plan) do not race to catch up.
             n = self.due(min(elapsed, 5 * period))
-            try:
-                for k in range(n):
-                    if self.paused or self.error:
-                        break
-                    if k:
-                        if loop.time() - now > period:
-                            # Ticks slower than real time: send a frame first and run the rest
-                            # later (the simulation falls behind, the view stays live).
-                            self._carry(n - k, 5 * period)
-                            break
-                        # Let waiting commands land between the ticks of a burst.
-                        await asyncio.sleep(0)
-                    self.tick()
-                    ran += 1
-            except Exception as exc:
-                self._fail(exc)
+            clients = list(self.clients)
+            want_full = any(c.needs_full for c in clients)
+            ran, d_msg, f_msg = await self.on_sim(self._burst, n, period, bool(clients), want_full)
             if now - rate_t >= 1.0:
                 sim_dt = self.sup.t - rate_sim
                 self._rate = sim_dt / (now - rate_t) if sim_dt >= 0 else 0.0
                 rate_t, rate_sim = now, self.sup.t
-            nbytes = self.broadcast()
+            nbytes = self.offer(d_msg, f_msg) if d_msg is not None else 0
             self.perf.append(
                 (
                     ran,
@@ -413,8 +567,7 @@ class Session:
             next_frame += period
             delay = next_frame - loop.time()
             if delay < MIN_YIELD_S:
-                # Behind: still give the loop a few milliseconds for I/O, so requests (an
-                # e-stop) are read and answered instead of waiting behind the ticks.
+                # Behind: still give the loop a few milliseconds for I/O (the viewers).
                 next_frame, delay = loop.time(), MIN_YIELD_S
             await asyncio.sleep(delay)
 
@@ -428,6 +581,10 @@ class Session:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
+        for pool in (self._sim_pool, self._work_pool):
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
+        self._sim_pool = self._work_pool = None
         self._end_observers()
         for o in self.observers:
             close = getattr(o, "close", None)

@@ -45,7 +45,7 @@ async def map_image(session: SessionDep):
 @router.get("/state", summary="The current state as one full frame")
 async def state(session: SessionDep) -> dict:
     """Same content as a full WebSocket frame (see docs/ui.md for the fields)."""
-    return session.snapshot()
+    return await session.on_sim(session.snapshot)
 
 
 @router.get("/perf", summary="Server load: CPU per tick, frame sizes, tick times")
