@@ -19,6 +19,7 @@ from fastapi.staticfiles import StaticFiles
 
 from swarmpark.server.engine import Session
 from swarmpark.server.frames import jsonable
+from swarmpark.server.guard import GuardMiddleware
 from swarmpark.server.routers import commands, meta, sim, state
 
 __all__ = [
@@ -42,6 +43,10 @@ boundary, preview and confirm a park, give manual goals, stop/resume, e-stop, te
 * A malformed request answers **422**; `message` names the field (unknown keys included).
 * With a token, every POST needs `Authorization: Bearer <token>` (401 otherwise) except
   `POST /api/estop`; GETs and the WebSocket `/api/ws` are open (read-only viewers).
+  Without a token, `swarmpark serve` still generates a per-server secret: every POST but
+  the e-stop needs `X-Swarmpark-Secret: <secret>` (403 otherwise).
+* Requests from another site (an `Origin` that is not this server's) and a `Host` that
+  names another server are refused (403 / 400); bodies over 256 kB get 413.
 """
 
 
@@ -108,6 +113,9 @@ def create_app(
     autostart: bool = True,
     scripted: bool = True,
     observers: Sequence = (),
+    secret: str | None = None,
+    allowed_hosts: Sequence[str] = (),
+    allowed_origins: Sequence[str] = (),
 ) -> FastAPI:
     """Build the operator-interface app for one scenario.
 
@@ -130,6 +138,11 @@ def create_app(
         Watchers of every run (:class:`swarmpark.record.live.LiveRecording`,
         :class:`swarmpark.record.audit.AuditLog`); with any, every ``POST /api/...`` is
         also passed to their ``on_command`` as an audit entry (client, token, answer).
+    secret
+        Without a token, control commands need this in ``X-Swarmpark-Secret`` (``swarmpark
+        serve`` always generates one); ``None``: open (tests, embedding).
+    allowed_hosts, allowed_origins
+        Host names and origins accepted besides the server's own (:mod:`.guard`).
 
     Raises
     ------
@@ -140,6 +153,8 @@ def create_app(
     path = Path(scenario_path) if scenario_path is not None else default_scenario(sdir)
     if token is not None and not token.strip():
         raise ValueError("token: must not be empty")
+    if secret is not None and not secret.strip():
+        raise ValueError("secret: must not be empty")
     session = Session(path, speed=speed, running=autostart, scripted=scripted, observers=observers)
 
     @contextlib.asynccontextmanager
@@ -158,9 +173,13 @@ def create_app(
     )
     app.state.session = session
     app.state.token = token
+    app.state.secret = secret
     app.state.scenarios_dir = sdir.resolve()
     app.add_exception_handler(RequestValidationError, _validation_error)  # type: ignore[arg-type]
-    if observers:
+    app.add_middleware(
+        GuardMiddleware, allowed_hosts=allowed_hosts, allowed_origins=allowed_origins
+    )
+    if observers:  # outside the guard: refused requests are audited too
         from swarmpark.record.audit import AuditMiddleware
 
         app.add_middleware(AuditMiddleware)

@@ -79,6 +79,8 @@ class Client:
     #: Overflows since the last frame that went out whole; past :data:`MAX_OVERFLOWS` the
     #: viewer is closed.
     overflows: int = 0
+    #: Dropped for being too slow (the WebSocket handler closes it).
+    closed: bool = False
 
     def offer(self, delta: str, full: str | None) -> None:
         msg = full if self.needs_full else delta
@@ -461,6 +463,10 @@ class Session:
         """Queue an encoded frame to every viewer (on the loop); returns the delta's bytes."""
         for c in list(self.clients):
             c.offer(d_msg, f_msg)
+            if c.overflows > MAX_OVERFLOWS:
+                c.closed = True
+                self.clients.discard(c)
+                log.warning("a viewer too slow for the frames was disconnected")
         self.last_message_bytes = len(d_msg)
         self.frames_sent += 1
         return len(d_msg)

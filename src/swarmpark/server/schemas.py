@@ -122,8 +122,13 @@ class ScenarioList(BaseModel):
 
 
 class AuthStatus(BaseModel):
+    """Whether this client may command: ``control`` is true if it holds the token (with
+    one) or the server's secret (without a token, when the server has one)."""
+
     token_required: bool
     control: bool
+    #: The server has a per-server secret (no token): the page must send it.
+    secret_required: bool = False
 
 
 # ----------------------------------------------------------------------------- GET /api/meta
