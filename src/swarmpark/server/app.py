@@ -94,14 +94,21 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     msg = str(first.get("msg", "")).removeprefix("Value error, ")
     if first.get("type") == "extra_forbidden":
         msg = "unknown key"
-    shown = first.get("input")
+    shown = _short(first.get("input"))
     more = f" ({len(errors) - 1} more error(s))" if len(errors) > 1 else ""
-    message = f"{field}: {msg} (got {shown!r}){more}"
+    message = f"{field}: {msg} (got {shown}){more}"
+    # The inputs are echoed cut short: a 200 kB id must not come back (or into a log) whole.
+    errors = [{**e, "input": _short(e.get("input"))} if "input" in e else e for e in errors[:10]]
     return JSONResponse(
         # (Non-finite inputs such as NaN become null: JSON has no NaN.)
         status_code=422,
         content={"message": message, "detail": jsonable(jsonable_encoder(errors))},
     )
+
+
+def _short(value, limit: int = 120) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def create_app(

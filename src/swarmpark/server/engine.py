@@ -76,8 +76,8 @@ class Client:
     queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
     needs_full: bool = True
     dropped: int = 0
-    #: Overflows since the last frame that went out whole; past :data:`MAX_OVERFLOWS` the
-    #: viewer is closed.
+    #: Overflows since the viewer last took a frame (the sender resets it); past
+    #: :data:`MAX_OVERFLOWS` the viewer is closed.
     overflows: int = 0
     #: Dropped for being too slow (the WebSocket handler closes it).
     closed: bool = False
@@ -96,8 +96,6 @@ class Client:
             if full is None:
                 return
             msg = full
-        else:
-            self.overflows = 0
         self.queue.put_nowait(msg)
         if msg is full:
             self.needs_full = False

@@ -100,6 +100,7 @@ async def stream(ws: WebSocket):
             except TimeoutError:
                 continue
             await ws.send_text(msg)
+            client.overflows = 0  # it keeps up
 
     async def receiver() -> None:
         with contextlib.suppress(WebSocketDisconnect):
