@@ -300,7 +300,7 @@ def test_a_viewer_that_never_reads_is_dropped_from_the_broadcast():
     s = Session(SMALL, running=False)
     slow = Client()
     s.clients.add(slow)
-    for _ in range(CLIENT_QUEUE * (MAX_OVERFLOWS + 2)):  # it overflows every few frames
+    for _ in range((CLIENT_QUEUE + 2) * (MAX_OVERFLOWS + 2)):  # it overflows every few frames
         s.broadcast()
     assert slow.closed and slow not in s.clients
 
