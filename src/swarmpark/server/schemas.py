@@ -100,6 +100,8 @@ class PreviewResult(BaseModel):
     goals: list[list[float]]  # [x_m, y_m, heading_deg]
     fill_order: list[int]
     report: dict[str, Any]
+    #: Per robot (in ``robots`` order), the index of the goal it would take.
+    goal_of: list[int] = []
 
 
 class SimStatus(BaseModel):

@@ -145,19 +145,20 @@ async def park_preview(cmd: ParkRequest, session: SessionDep):
     bad = _off_map(session, "park", cmd)
     if bad is not None:
         return bad
-    try:
-        idx, _, lay = await session.off_loop(sup.plan_layout, cmd)
-    except (ValueError, GeometryError) as exc:
-        out = Outcome(False, "park.preview", str(exc), sup.t)
+    # The whole plan (layout, assignment, fill order) in the work pool: the ticks go on.
+    plan = await session.off_loop(sup.prepare_park, cmd)
+    if isinstance(plan, str):
+        out = Outcome(False, "park.preview", plan, sup.t)
         return JSONResponse(status_code=409, content=CommandResult(**out.as_dict()).model_dump())
-    poses = np.asarray(lay.poses, float)
-    goals = np.column_stack([poses[:, :2], np.rad2deg(poses[:, 2])])
+    g = plan.group
+    goals = np.column_stack([g.goals[:, :2], np.rad2deg(g.goals[:, 2])])
     return PreviewResult(
-        robots=[sup.ids[i] for i in idx],
-        method=lay.method,
+        robots=[sup.ids[i] for i in g.robots],
+        method=g.method,
         goals=np.round(goals, 4).tolist(),
-        fill_order=[int(k) for k in lay.fill_order],
-        report=jsonable(dict(lay.report)),
+        fill_order=[int(k) for k in g.fill_order],
+        report=jsonable(dict(g.report)),
+        goal_of=[int(k) for k in g.goal_of],
     )
 
 
