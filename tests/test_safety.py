@@ -327,3 +327,19 @@ def test_release_is_final_for_teleop_requests_in_flight():
     assert not s.sup.teleop[0]
     clock.t += TELEOP_DEADMAN_S  # a deliberate take-over later works
     assert s.teleop("s1", 0.3, 0.0).accepted and s.sup.teleop[0]
+
+
+def test_teleop_goes_through_the_collision_monitor_and_stops_before_contact():
+    clock = FakeClock()
+    s = Session(SMALL, running=False, clock=clock)
+    # s2 parks right in front of s1's nose, then the operator drives s1 straight at it.
+    assert s.sup.command("goto", {"robot": "s2", "pose": [5.0, 2.0, 0.0]}).accepted
+    s.step(400)
+    assert np.hypot(*(s.sup.sim.poses[1, :2] - [5.0, 2.0])) < 0.2
+    assert s.teleop("s1", 0.8, 0.0).accepted
+    s.step(300)  # 15 s at 0.8 m/s would be 12 m: far past s2 without the monitor
+    gap = s.sup.sim.poses[1, 0] - s.sup.sim.poses[0, 0]
+    assert 1.2 < gap < 2.5, gap  # stopped short of s2 (skids are 1.2 m long), after moving
+    assert s.sup.sim.vel[0, 0] == pytest.approx(0.0, abs=1e-6)
+    assert s.sup.metrics.collisions == []
+    assert not [a for a in s.alarms if a["kind"] == "teleop-contact"]

@@ -366,13 +366,28 @@ class Session:
         """One fixed step of the core (timed for the status panel)."""
         self._keep_teleop_alive()
         t0, c0 = time.perf_counter(), time.process_time()
-        self.sup.tick()
+        step = self.sup.tick()
         ms = (time.perf_counter() - t0) * 1e3
+        if step is not None and step.new_contacts and self.sup.teleop.any():
+            self._teleop_contacts(step.new_contacts)
         self.tick_ms.append(ms)
         self._tick_wall_ms += ms
         self._cpu_ms += (time.process_time() - c0) * 1e3
         for o in self.observers:
             o.on_tick(self.sup)
+
+    def _teleop_contacts(self, contacts) -> None:
+        """A contact of a teleoperated skid is an alarm (the monitor should have stopped it)."""
+        driven = {self.sup.ids[i] for i in np.flatnonzero(self.sup.teleop)}
+        for c in contacts:
+            if c.a in driven or c.b in driven:
+                self.alarm(
+                    {
+                        "kind": "teleop-contact",
+                        "text": f"{c.kind} contact under teleop: {c.a} - {c.b}",
+                        "robots": [r for r in (c.a, c.b) if r in self.sup.index],
+                    }
+                )
 
     def step(self, ticks: int) -> None:
         """Run ``ticks`` ticks now; a failing tick pauses the session with :attr:`error`."""

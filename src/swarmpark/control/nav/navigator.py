@@ -772,6 +772,15 @@ class Navigator:
             self._joint_check(view, idx, out, body, times)
         return out
 
+    def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
+        """Commands ``raw`` of skids ``idx`` not driven by this controller (teleop), scaled
+        down by the collision monitor until their short forward simulation is free."""
+        self._outlines(view)  # (cached) the outlines and static solids the monitor uses
+        self._static_points(view)
+        if len(self._robots) != len(view.poses):
+            self.compute(view)  # the per-skid state (a first tick with nothing active)
+        return self._monitor(view, np.asarray(idx, int), np.asarray(raw, float))
+
     def _rollout(
         self, view: ControlView, rows: np.ndarray, v_cmd: np.ndarray, w_cmd, times: np.ndarray
     ) -> np.ndarray:

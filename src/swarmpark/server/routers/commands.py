@@ -24,7 +24,6 @@ import numpy as np
 from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 
-from swarmpark.core.geometry import GeometryError
 from swarmpark.core.limits import check_inside
 from swarmpark.server.deps import SessionDep, require_control
 from swarmpark.server.frames import jsonable
