@@ -31,16 +31,23 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from swarmpark.server.frames import FrameEncoder, map_png, world_info
+from swarmpark.server.viewers import CLIENT_QUEUE, MAX_OVERFLOWS, Client, perf_report
 from swarmpark.supervisor.core import TELEOP_TIMEOUT_S, Outcome, Supervisor
 from swarmpark.world.scenario import World, build_world, load_scenario
 
-__all__ = ["Session", "Client", "FRAME_HZ", "TELEOP_DEADMAN_S"]
+__all__ = [
+    "Session",
+    "Client",
+    "FRAME_HZ",
+    "TELEOP_DEADMAN_S",
+    "CLIENT_QUEUE",
+    "MAX_OVERFLOWS",
+]
 
 log = logging.getLogger("swarmpark.server")
 
@@ -52,8 +59,6 @@ MAX_TICKS_PER_FRAME = 40
 #: A teleop command is re-applied while the operator sent it within this many wall seconds
 #: (the dead-man: a closed tab or a dropped link stops the skid).
 TELEOP_DEADMAN_S = 0.5
-#: Frames a slow client may have queued before older ones are dropped.
-CLIENT_QUEUE = 4
 #: Wall-clock tick timings kept for the status panel.
 TICK_HISTORY = 200
 #: Least time the pacing task sleeps per frame (s), even when it is behind.
@@ -64,41 +69,6 @@ PERF_HISTORY = 2000
 ALARM_HISTORY = 50
 #: Heavy work (previews, park plans, scenario loads) that may run at once, off the loop.
 WORK_THREADS = 2
-#: A viewer whose queue overflowed this many times in a row is disconnected (a slow link
-#: must not cost the others, or the simulation, anything).
-MAX_OVERFLOWS = 20
-
-
-@dataclass(eq=False)
-class Client:
-    """One WebSocket viewer: a small queue of encoded frames, and whether it needs a full one."""
-
-    queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
-    needs_full: bool = True
-    dropped: int = 0
-    #: Overflows since the viewer last took a frame (the sender resets it); past
-    #: :data:`MAX_OVERFLOWS` the viewer is closed.
-    overflows: int = 0
-    #: Dropped for being too slow (the WebSocket handler closes it).
-    closed: bool = False
-
-    def offer(self, delta: str, full: str | None) -> None:
-        msg = full if self.needs_full else delta
-        if msg is None:
-            return
-        if self.queue.full():
-            # A dropped delta may have carried a slow part: resend everything next time.
-            while not self.queue.empty():
-                self.queue.get_nowait()
-                self.dropped += 1
-            self.needs_full = True
-            self.overflows += 1
-            if full is None:
-                return
-            msg = full
-        self.queue.put_nowait(msg)
-        if msg is full:
-            self.needs_full = False
 
 
 class Session:
@@ -491,34 +461,8 @@ class Session:
         return self.offer(*self.encode(any(c.needs_full for c in self.clients)))
 
     def perf_report(self, frames: int | None = None) -> dict:
-        """Server load over the last ``frames`` (at most :data:`PERF_HISTORY`) paced frames."""
-        rows = list(self.perf)
-        if frames is not None:
-            rows = rows[-frames:] if frames > 0 else []
-        ticks = sum(r[0] for r in rows)
-        cpu = [r[1] for r in rows]
-        sizes = [r[2] for r in rows if r[2] > 0]
-        enc = [r[4] for r in rows if r[2] > 0]
-        return {
-            "frames": len(rows),
-            "ticks": ticks,
-            "clients": len(self.clients),
-            "robots": self.sup.sim.n,
-            "cpu_ms_per_tick": round(sum(cpu) / ticks, 3) if ticks else None,
-            "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 3) if cpu else None,
-            "cpu_ms_per_frame_p99": round(float(np.percentile(cpu, 99)), 3) if cpu else None,
-            "cpu_ms_per_frame_max": round(max(cpu), 3) if cpu else None,
-            "tick_wall_ms_mean": round(sum(r[3] for r in rows) / ticks, 3) if ticks else None,
-            "encode_wall_ms_mean": round(float(np.mean(enc)), 3) if enc else None,
-            "message_bytes_mean": round(float(np.mean(sizes)), 1) if sizes else None,
-            "message_bytes_max": max(sizes) if sizes else None,
-            "process_cpu_s": round(time.process_time(), 4),
-            "frames_sent": self.frames_sent,
-            "frames_paced": self.frames_paced,
-            "sim_t_s": round(self.sup.t, 3),
-            "ticks_total": self.sup.sim.tick,
-            "monotonic_s": round(time.monotonic(), 4),
-        }
+        """Server load over the last ``frames`` paced frames (:func:`.viewers.perf_report`)."""
+        return perf_report(self, frames)
 
     # ------------------------------------------------------------------ the pacing task
 
