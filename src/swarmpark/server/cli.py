@@ -215,7 +215,16 @@ def serve_command(argv: list[str]) -> int:
     query = "" if args.token else f"?secret={secret}"
     sys.stderr.write(f"swarmpark serve: operator interface on http://{shown}:{args.port}/{query}\n")
     try:
-        uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+        uvicorn.run(
+            app,
+            host=args.host,
+            port=args.port,
+            log_level="warning",
+            # Every viewer gets the same frame: compressing it once per connection (the
+            # per-message deflate browsers ask for) costs more CPU than the frames save on
+            # a console's LAN, and 200 viewers would slow the simulation.
+            ws_per_message_deflate=False,
+        )
     except OSError as exc:  # address not available
         sys.stderr.write(f"swarmpark serve: error: {exc}\n")
         return EXIT_BAD_INPUT
