@@ -344,3 +344,24 @@ def test_teleop_goes_through_the_collision_monitor_and_stops_before_contact():
     assert s.sup.sim.vel[0, 0] == pytest.approx(0.0, abs=1e-6)
     assert s.sup.metrics.collisions == []
     assert not [a for a in s.alarms if a["kind"] == "teleop-contact"]
+
+
+def test_a_crowd_of_viewers_gets_frames_in_turns(monkeypatch):
+    from swarmpark.server import viewers
+    from swarmpark.server.engine import Client
+
+    monkeypatch.setattr(viewers, "SENDS_PER_FRAME", 2)
+    s = Session(SMALL, running=False)
+    crowd = [Client() for _ in range(4)]  # stride 2: every viewer gets every other frame
+    s.clients.update(crowd)
+    got = []
+    for _ in range(6):
+        s.broadcast()
+        got.append([c.queue.qsize() for c in crowd])
+        for c in crowd:  # the viewers read what they got
+            while not c.queue.empty():
+                msg = json.loads(c.queue.get_nowait())
+                assert msg["full"] is True  # after a skipped frame, a whole one
+    sent = np.array(got)
+    assert sent.sum(axis=1).tolist() == [2] * 6  # two sends per frame, not four
+    assert sent.sum(axis=0).tolist() == [3] * 4  # everyone gets half of the frames

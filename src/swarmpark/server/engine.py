@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmpark.server import viewers
 from swarmpark.server.frames import FrameEncoder, map_png, world_info
 from swarmpark.server.viewers import CLIENT_QUEUE, MAX_OVERFLOWS, Client, perf_report
 from swarmpark.supervisor.core import TELEOP_TIMEOUT_S, Outcome, Supervisor
@@ -444,7 +445,12 @@ class Session:
 
     def offer(self, d_msg: str, f_msg: str | None) -> int:
         """Queue an encoded frame to every viewer (on the loop); returns the delta's bytes."""
-        for c in list(self.clients):
+        clients = list(self.clients)
+        stride = -(-len(clients) // viewers.SENDS_PER_FRAME)
+        for c in clients:
+            if stride > 1 and (self.seq + c.slot) % stride:
+                c.needs_full = True  # not its turn: the next frame it gets is whole
+                continue
             c.offer(d_msg, f_msg)
             if c.overflows > MAX_OVERFLOWS:
                 c.closed = True

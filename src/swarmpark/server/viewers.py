@@ -4,6 +4,7 @@ dropped, never waited for) and the server-load report of ``GET /api/perf``."""
 from __future__ import annotations
 
 import asyncio
+import itertools
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -13,13 +14,19 @@ import numpy as np
 if TYPE_CHECKING:
     from swarmpark.server.engine import Session
 
-__all__ = ["Client", "perf_report", "CLIENT_QUEUE", "MAX_OVERFLOWS"]
+__all__ = ["Client", "perf_report", "CLIENT_QUEUE", "MAX_OVERFLOWS", "SENDS_PER_FRAME"]
 
 #: Frames a slow client may have queued before older ones are dropped.
 CLIENT_QUEUE = 4
 #: A viewer whose queue overflowed this many times without it taking a frame is
 #: disconnected (a slow link must not cost the others, or the simulation, anything).
 MAX_OVERFLOWS = 20
+#: At most about this many viewers are sent each frame: with more, each viewer gets every
+#: k-th frame in turn (k = ceil(viewers / SENDS_PER_FRAME); 200 viewers: 10 frames/s each),
+#: so a crowd costs the server a bounded number of sends and never slows the simulation.
+SENDS_PER_FRAME = 50
+
+_slots = itertools.count()
 
 
 @dataclass(eq=False)
@@ -34,6 +41,8 @@ class Client:
     overflows: int = 0
     #: Dropped for being too slow (the WebSocket handler closes it).
     closed: bool = False
+    #: Its turn among the viewers when there are more than :data:`SENDS_PER_FRAME`.
+    slot: int = field(default_factory=lambda: next(_slots))
 
     def offer(self, delta: str, full: str | None) -> None:
         msg = full if self.needs_full else delta
