@@ -22,9 +22,9 @@ CLIENT_QUEUE = 4
 #: disconnected (a slow link must not cost the others, or the simulation, anything).
 MAX_OVERFLOWS = 20
 #: At most about this many viewers are sent each frame: with more, each viewer gets every
-#: k-th frame in turn (k = ceil(viewers / SENDS_PER_FRAME); 200 viewers: 10 of the 20 frames/s),
+#: k-th frame in turn (k = ceil(viewers / SENDS_PER_FRAME); 200 viewers: 5 of the 20 frames/s),
 #: so a crowd costs the server a bounded number of sends and never slows the simulation.
-SENDS_PER_FRAME = 100
+SENDS_PER_FRAME = 50
 
 _slots = itertools.count()
 
