@@ -430,3 +430,108 @@ def test_click_shift_click_pan_and_zoom(page, server):
     assert abs(b[0] - a[0] - 100) < 1 and abs(b[1] - a[1] - 50) < 1  # the map moved with it
     pg.click("#zoom-fit")
     assert abs(px_m(pg) - scale) < 1e-6
+
+
+# ----------------------------------------------------------------------------- operator safety
+
+
+DOCS_IMG = Path(__file__).parents[1] / "docs" / "img"
+
+
+@pytest.mark.parametrize("width", [800, 1024, 1366])
+def test_estop_is_pinned_and_visible_at_any_width_even_with_a_token(browser, width):
+    with LiveServer(token=TOKEN) as srv:
+        pg = browser.new_page(viewport={"width": width, "height": 768})
+        pg.goto(srv.url + "/")
+        pg.wait_for_function("document.getElementById('auth-badge').textContent === 'read-only'")
+        box = pg.locator("#estop").bounding_box()
+        assert box["x"] >= 0 and box["x"] + box["width"] <= width, box
+        assert box["y"] >= 0 and box["y"] + box["height"] <= 768, box
+        # Nothing is drawn over it: the element at its centre is the button itself.
+        hit = pg.evaluate(
+            "([x, y]) => document.elementFromPoint(x, y).closest('#estop') !== null",
+            [box["x"] + box["width"] / 2, box["y"] + box["height"] / 2],
+        )
+        assert hit
+        assert "token" in pg.inner_text("#ro-banner")
+        pg.close()
+
+
+def test_estop_shows_sent_acknowledged_then_applied_and_the_ui_at_1024(browser, server):
+    server.call("POST", "/api/scenario", {"name": "ui-small.yaml"})
+    server.call("POST", "/api/sim", {"paused": False, "speed": 2.0})
+    pg = browser.new_page(viewport={"width": 1024, "height": 768})
+    pg.goto(server.url + "/")
+    pg.wait_for_function(
+        "document.querySelectorAll('#status-table tbody tr[data-state]').length === 4"
+    )
+    server.call("POST", "/api/park/preview", {"robots": ROBOTS, "boundary": [list(v) for v in BOX]})
+    server.call("POST", "/api/park", {"robots": ROBOTS, "boundary": [list(v) for v in BOX]})
+    pg.wait_for_function("window.swarmpark.S.frame.robots.every(r => Math.abs(r[4]) > 0.05)")
+    DOCS_IMG.mkdir(parents=True, exist_ok=True)
+    pg.screenshot(path=str(DOCS_IMG / "ui-1024x768.png"))
+    pg.keyboard.press("Space")
+    pg.wait_for_function("document.getElementById('estop-state').className === 'applied'")
+    assert pg.inner_text("#estop-state").startswith("applied")
+    assert "estop" in pg.inner_text("#log")
+    park_line = [t for t in pg.inner_text("#log").splitlines() if "park" in t][0]
+    assert "s1" in park_line  # the log names the skids a command applied to
+    pg.click("#resume-all")
+    pg.wait_for_function("window.swarmpark.S.frame.estop === false")
+    pg.close()
+
+
+def test_stale_link_banner_when_frames_stop(browser):
+    srv = LiveServer()
+    srv.__enter__()
+    try:
+        pg = browser.new_page(viewport={"width": 1024, "height": 768})
+        pg.goto(srv.url + "/")
+        pg.wait_for_function("window.swarmpark.S.frame !== null")
+        assert pg.is_hidden("#stale-banner")
+    finally:
+        srv.__exit__(None, None, None)
+    pg.wait_for_function("!document.getElementById('stale-banner').classList.contains('hidden')")
+    assert "stale" in pg.inner_text("#stale-banner")
+    pg.close()
+
+
+def test_secret_from_the_url_gives_control_and_without_it_the_page_says_read_only(browser):
+    with LiveServer(secret="page-secret") as srv:
+        pg = browser.new_page(viewport={"width": 1024, "height": 768})
+        pg.goto(srv.url + "/")
+        pg.wait_for_function("document.getElementById('ro-banner').textContent.includes('URL')")
+        assert pg.is_disabled("#sim-pause")
+        pg.close()
+        pg = browser.new_page(viewport={"width": 1024, "height": 768})
+        pg.goto(srv.url + "/?secret=page-secret")
+        pg.wait_for_function("!document.getElementById('sim-pause').disabled")
+        assert "secret" not in pg.url  # taken from the URL and hidden
+        pg.click("#sim-pause")
+        pg.wait_for_function("window.swarmpark.S.frame.sim.paused === true")
+        pg.close()
+
+
+def test_a_page_of_another_origin_cannot_command_or_watch(browser, server):
+    rev = server.call("GET", "/api/sim")["rev"]
+    with LiveServer() as other:  # another port: another origin
+        pg = browser.new_page()
+        pg.goto(other.url + "/static/style.css")
+        result = pg.evaluate(
+            """async (target) => {
+                let post = "sent";
+                try { await fetch(target + "/api/sim/reset", {method: "POST", mode: "no-cors"}); }
+                catch (e) { post = "error"; }
+                const ws = await new Promise((resolve) => {
+                    const s = new WebSocket(target.replace("http", "ws") + "/api/ws");
+                    s.onmessage = () => resolve("frame");
+                    s.onclose = () => resolve("closed");
+                    setTimeout(() => resolve("timeout"), 5000);
+                });
+                return {post, ws};
+            }""",
+            server.url,
+        )
+        pg.close()
+    assert result["ws"] == "closed", result
+    assert server.call("GET", "/api/sim")["rev"] == rev  # the reset was refused

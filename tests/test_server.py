@@ -481,8 +481,9 @@ def test_viewers_without_the_token_can_read(guarded):
         "/",
     ):
         assert c.get(path).status_code == 200, path
-    assert c.get("/api/auth").json() == {"token_required": True, "control": False}
-    assert c.get("/api/auth", headers=AUTH).json() == {"token_required": True, "control": True}
+    no = {"token_required": True, "control": False, "secret_required": False}
+    assert c.get("/api/auth").json() == no
+    assert c.get("/api/auth", headers=AUTH).json() == {**no, "control": True}
     with c.websocket_connect("/api/ws") as ws:
         frame = ws.receive_json()
     assert frame["type"] == "state" and len(frame["robots"]) == 4
@@ -499,7 +500,11 @@ def test_estop_needs_no_token_but_releasing_it_does(guarded):
 
 
 def test_without_a_token_everything_is_open(client):
-    assert client.get("/api/auth").json() == {"token_required": False, "control": True}
+    assert client.get("/api/auth").json() == {
+        "token_required": False,
+        "control": True,
+        "secret_required": False,
+    }
 
 
 # ----------------------------------------------------------------------------- sim control

@@ -34,6 +34,14 @@ __all__ = [
     "finite_sequence",
     "check_grid_cells",
     "check_vertices",
+    "check_inside",
+    "MAX_HEADING_DEG",
+    "MAX_DURATION_S",
+    "MIN_DT_S",
+    "MAX_TICKS",
+    "MAX_BODY_BYTES",
+    "MAX_VIEWERS",
+    "MAX_ROBOTS",
 ]
 
 #: Grids (maps, costmaps) larger than this are refused before anything is allocated: a
@@ -53,6 +61,20 @@ MAX_FOOTPRINT_M = 50.0
 MAX_ROBOTS_PER_COMMAND = 5_000
 #: Robot and person ids longer than this are refused (they go into every frame and log line).
 MAX_ID_LENGTH = 64
+#: Headings (degrees) beyond this many turns are a typo (and lose precision when wrapped).
+MAX_HEADING_DEG = 3600.0
+#: A scenario runs at most a day of simulated time, in ticks of at least a millisecond, and
+#: at most this many ticks in all, so every run ends.
+MAX_DURATION_S = 86_400.0
+MIN_DT_S = 1e-3
+MAX_TICKS = 10_000_000
+#: Skids in one scenario.
+MAX_ROBOTS = 1_000
+#: Largest request body the server reads (HTTP 413 beyond): a park boundary of the largest
+#: allowed polygon is a few tens of kB.
+MAX_BODY_BYTES = 256 * 1024
+#: WebSocket viewers of one server at once (more are refused with close code 1013).
+MAX_VIEWERS = 256
 
 
 def _show(value: object, limit: int = 40) -> str:
@@ -121,3 +143,24 @@ def check_vertices(n: int, field: str, *, error: type[ValueError] = ValueError) 
     """Refuse a polygon with more than :data:`MAX_POLYGON_VERTICES` vertices."""
     if n > MAX_POLYGON_VERTICES:
         raise error(f"{field} has {n} vertices, more than the limit of {MAX_POLYGON_VERTICES}")
+
+
+def check_inside(
+    points: Sequence[Sequence[float]],
+    bounds: Sequence[float],
+    field: str,
+    *,
+    error: type[ValueError] = ValueError,
+) -> None:
+    """Refuse the first point ``[x, y, ...]`` outside ``bounds`` = ``(xmin, ymin, xmax,
+    ymax)`` (the map), naming it: a goal or boundary off the map is a typo, never a place a
+    skid can go."""
+    xmin, ymin, xmax, ymax = (float(b) for b in bounds)
+    for k, p in enumerate(points):
+        x, y = float(p[0]), float(p[1])
+        if not (xmin <= x <= xmax and ymin <= y <= ymax):
+            where = f"{field}[{k}]" if len(points) > 1 else field
+            raise error(
+                f"{where}: {_show([x, y])} is outside the map "
+                f"[{xmin:g}, {ymin:g}, {xmax:g}, {ymax:g}]"
+            )

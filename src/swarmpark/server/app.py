@@ -19,6 +19,7 @@ from fastapi.staticfiles import StaticFiles
 
 from swarmpark.server.engine import Session
 from swarmpark.server.frames import jsonable
+from swarmpark.server.guard import GuardMiddleware
 from swarmpark.server.routers import commands, meta, sim, state
 
 __all__ = [
@@ -42,6 +43,10 @@ boundary, preview and confirm a park, give manual goals, stop/resume, e-stop, te
 * A malformed request answers **422**; `message` names the field (unknown keys included).
 * With a token, every POST needs `Authorization: Bearer <token>` (401 otherwise) except
   `POST /api/estop`; GETs and the WebSocket `/api/ws` are open (read-only viewers).
+  Without a token, `swarmpark serve` still generates a per-server secret: every POST but
+  the e-stop needs `X-Swarmpark-Secret: <secret>` (403 otherwise).
+* Requests from another site (an `Origin` that is not this server's) and a `Host` that
+  names another server are refused (403 / 400); bodies over 256 kB get 413.
 """
 
 
@@ -89,14 +94,21 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     msg = str(first.get("msg", "")).removeprefix("Value error, ")
     if first.get("type") == "extra_forbidden":
         msg = "unknown key"
-    shown = first.get("input")
+    shown = _short(first.get("input"))
     more = f" ({len(errors) - 1} more error(s))" if len(errors) > 1 else ""
-    message = f"{field}: {msg} (got {shown!r}){more}"
+    message = f"{field}: {msg} (got {shown}){more}"
+    # The inputs are echoed cut short: a 200 kB id must not come back (or into a log) whole.
+    errors = [{**e, "input": _short(e.get("input"))} if "input" in e else e for e in errors[:10]]
     return JSONResponse(
         # (Non-finite inputs such as NaN become null: JSON has no NaN.)
         status_code=422,
         content={"message": message, "detail": jsonable(jsonable_encoder(errors))},
     )
+
+
+def _short(value, limit: int = 120) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def create_app(
@@ -109,6 +121,9 @@ def create_app(
     scripted: bool = True,
     observers: Sequence = (),
     link_factory=None,
+    secret: str | None = None,
+    allowed_hosts: Sequence[str] = (),
+    allowed_origins: Sequence[str] = (),
 ) -> FastAPI:
     """Build the operator-interface app for one scenario.
 
@@ -134,6 +149,11 @@ def create_app(
     link_factory
         Builds the robots' link for a world (``None``: the simulator; ROS 2: see
         :func:`swarmpark.links.ros2.link_from_args`).
+    secret
+        Without a token, control commands need this in ``X-Swarmpark-Secret`` (``swarmpark
+        serve`` always generates one); ``None``: open (tests, embedding).
+    allowed_hosts, allowed_origins
+        Host names and origins accepted besides the server's own (:mod:`.guard`).
 
     Raises
     ------
@@ -144,6 +164,8 @@ def create_app(
     path = Path(scenario_path) if scenario_path is not None else default_scenario(sdir)
     if token is not None and not token.strip():
         raise ValueError("token: must not be empty")
+    if secret is not None and not secret.strip():
+        raise ValueError("secret: must not be empty")
     session = Session(
         path,
         speed=speed,
@@ -169,9 +191,13 @@ def create_app(
     )
     app.state.session = session
     app.state.token = token
+    app.state.secret = secret
     app.state.scenarios_dir = sdir.resolve()
     app.add_exception_handler(RequestValidationError, _validation_error)  # type: ignore[arg-type]
-    if observers:
+    app.add_middleware(
+        GuardMiddleware, allowed_hosts=allowed_hosts, allowed_origins=allowed_origins
+    )
+    if observers:  # outside the guard: refused requests are audited too
         from swarmpark.record.audit import AuditMiddleware
 
         app.add_middleware(AuditMiddleware)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import math
+import secrets
 import sys
 
 __all__ = ["serve_command", "build_parser"]
@@ -41,6 +42,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8000, help="TCP port (default 8000)")
     p.add_argument("--token", help="control commands need this token; others are read-only")
+    p.add_argument(
+        "--allow-host", action="append", default=[], metavar="NAME",
+        help="also answer requests whose Host is NAME (IP addresses and localhost always are)",
+    )  # fmt: skip
+    p.add_argument(
+        "--allow-origin", action="append", default=[], metavar="ORIGIN",
+        help="also accept requests from pages of ORIGIN (e.g. https://console.example)",
+    )  # fmt: skip
     p.add_argument(
         "--speed",
         type=float,
@@ -175,6 +184,7 @@ def serve_command(argv: list[str]) -> int:
             def factory(world):
                 return link_from_args(world, args, paced=False)  # the session paces
 
+        secret = secrets.token_urlsafe(18)
         try:
             observers, notes = _observers(args)
         except (OSError, RuntimeError) as exc:  # the Foxglove port in use (FoxgloveError)
@@ -189,6 +199,11 @@ def serve_command(argv: list[str]) -> int:
                 autostart=not args.paused,
                 scripted=not args.no_script,
                 observers=observers,
+                # Without a token the controls still need a per-server secret (sent by the
+                # page, from the URL printed below), so no other site can drive the swarm.
+                secret=None if args.token else secret,
+                allowed_hosts=[*args.allow_host, args.host],
+                allowed_origins=args.allow_origin,
             )
         except BaseException:
             for o in observers:
@@ -210,9 +225,19 @@ def serve_command(argv: list[str]) -> int:
     for note in notes:
         sys.stderr.write(f"swarmpark serve: {note}\n")
     shown = f"[{args.host}]" if ":" in args.host else args.host
-    sys.stderr.write(f"swarmpark serve: operator interface on http://{shown}:{args.port}/\n")
+    query = "" if args.token else f"?secret={secret}"
+    sys.stderr.write(f"swarmpark serve: operator interface on http://{shown}:{args.port}/{query}\n")
     try:
-        uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+        uvicorn.run(
+            app,
+            host=args.host,
+            port=args.port,
+            log_level="warning",
+            # Every viewer gets the same frame: compressing it once per connection (the
+            # per-message deflate browsers ask for) costs more CPU than the frames save on
+            # a console's LAN, and 200 viewers would slow the simulation.
+            ws_per_message_deflate=False,
+        )
     except OSError as exc:  # address not available
         sys.stderr.write(f"swarmpark serve: error: {exc}\n")
         return EXIT_BAD_INPUT

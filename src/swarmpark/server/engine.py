@@ -1,30 +1,54 @@
 """The served simulation: one supervisor, paced by real time, and the clients watching it.
 
-The core stays deterministic: :class:`Session` calls :meth:`Supervisor.tick` at fixed steps
-from one asyncio task; pacing, the speed factor and pause live here. API handlers are
-coroutines on the same event loop, so a command always lands *between* two ticks and no
-two pieces of code ever touch the supervisor at once (no threads).
+The core stays deterministic: :class:`Session` calls :meth:`Supervisor.tick` at fixed steps;
+pacing, the speed factor and pause live here.
+
+Threads (the event loop must never wait on the simulation):
+
+* **the sim thread** (one worker, :meth:`Session.on_sim`) owns the supervisor: ticks, frame
+  encoding and every command that changes orders run there, one after the other, so a
+  command still lands *between* two ticks and no two pieces of code change the supervisor at
+  once;
+* **the work pool** (:meth:`Session.off_loop`) runs heavy read-mostly work: layout previews,
+  the layout and planning of a park, loading and building a scenario; its result is applied
+  in the sim thread;
+* **the event loop** answers requests and feeds the viewers. The e-stop and per-robot stops
+  are applied from here at once (:meth:`Session.estop_now`): a latched flag and a hold on the
+  robot link, which the tick reads; nothing queues in front of them.
+
+A tick that raises stops every skid (link hold), pauses the session with :attr:`error`,
+raises an alarm and keeps the orders (goals, groups) for a resume after the fix.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 import logging
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from swarmpark.server import viewers
 from swarmpark.server.frames import FrameEncoder, map_png, world_info
+from swarmpark.server.viewers import CLIENT_QUEUE, MAX_OVERFLOWS, Client, perf_report
 from swarmpark.supervisor.core import TELEOP_TIMEOUT_S, Outcome, Supervisor
 from swarmpark.world.scenario import World, build_world, load_scenario
 
-__all__ = ["Session", "Client", "FRAME_HZ", "TELEOP_DEADMAN_S"]
+__all__ = [
+    "Session",
+    "Client",
+    "FRAME_HZ",
+    "TELEOP_DEADMAN_S",
+    "CLIENT_QUEUE",
+    "MAX_OVERFLOWS",
+]
 
 log = logging.getLogger("swarmpark.server")
 
@@ -36,40 +60,16 @@ MAX_TICKS_PER_FRAME = 40
 #: A teleop command is re-applied while the operator sent it within this many wall seconds
 #: (the dead-man: a closed tab or a dropped link stops the skid).
 TELEOP_DEADMAN_S = 0.5
-#: Frames a slow client may have queued before older ones are dropped.
-CLIENT_QUEUE = 4
 #: Wall-clock tick timings kept for the status panel.
 TICK_HISTORY = 200
 #: Least time the pacing task sleeps per frame (s), even when it is behind.
 MIN_YIELD_S = 0.003
 #: Paced frames kept for GET /api/perf.
 PERF_HISTORY = 2000
-
-
-@dataclass(eq=False)
-class Client:
-    """One WebSocket viewer: a small queue of encoded frames, and whether it needs a full one."""
-
-    queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
-    needs_full: bool = True
-    dropped: int = 0
-
-    def offer(self, delta: str, full: str | None) -> None:
-        msg = full if self.needs_full else delta
-        if msg is None:
-            return
-        if self.queue.full():
-            # A dropped delta may have carried a slow part: resend everything next time.
-            while not self.queue.empty():
-                self.queue.get_nowait()
-                self.dropped += 1
-            self.needs_full = True
-            if full is None:
-                return
-            msg = full
-        self.queue.put_nowait(msg)
-        if msg is full:
-            self.needs_full = False
+#: Alarms kept for the alarms panel (newest last).
+ALARM_HISTORY = 50
+#: Heavy work (previews, park plans, scenario loads) that may run at once, off the loop.
+WORK_THREADS = 2
 
 
 class Session:
@@ -129,6 +129,14 @@ class Session:
         self._rate = 0.0
         self._tick_wall_ms = 0.0
         self._cpu_ms = 0.0
+        #: Alarms raised (failed ticks, contacts under teleop): ``{"t_s", "kind", "text"}``.
+        self.alarms: deque[dict] = deque(maxlen=ALARM_HISTORY)
+        self.alarm_seq = 0
+        #: Wall time (clock) each robot was released: a teleop request issued before the
+        #: release may still arrive after it and must not take the skid back.
+        self._released: dict[str, float] = {}
+        self._sim_pool: ThreadPoolExecutor | None = None
+        self._work_pool: ThreadPoolExecutor | None = None
         self.load(scenario_path, scripted=scripted)
 
     # ------------------------------------------------------------------ scenario
@@ -136,11 +144,19 @@ class Session:
     def load(self, path: str | Path, *, scripted: bool = True) -> None:
         """Load a scenario (raises :class:`~swarmpark.world.scenario.ScenarioError`, changing
         nothing, if it is bad)."""
+        self.install(*self.build(path, scripted=scripted))
+
+    @staticmethod
+    def build(path: str | Path, *, scripted: bool = True) -> tuple[Path, bool, World]:
+        """Read and build a scenario (no state touched: safe in the work pool)."""
         path = Path(path)
         scn = load_scenario(path)
         if not scripted:
             scn = scn.model_copy(update={"commands": []})
-        world = build_world(scn)
+        return path, scripted, build_world(scn)
+
+    def install(self, path: Path, scripted: bool, world: World) -> None:
+        """Serve a built world (in the sim thread, between ticks)."""
         self.path, self.scripted, self.world = path.resolve(), scripted, world
         self._start(world)
 
@@ -162,6 +178,7 @@ class Session:
         self.encoder = FrameEncoder(self.sup)
         self.rev += 1
         self.error = None
+        self._released = {}
         self._teleop: dict[str, tuple[float, float, float, float]] = {}
         self._budget_s = 0.0
         self._world_info = {"rev": self.rev, **self.describe(), **world_info(self.sup)}
@@ -184,7 +201,19 @@ class Session:
             o.on_end(sup, result)
 
     def alarm(self, entry: dict) -> None:
-        """Pass an alarm (e.g. a failed tick) to the observers that take them."""
+        """Raise an alarm (shown in the alarms panel) and pass it to the observers that take
+        them (e.g. a failed tick)."""
+        self.alarm_seq += 1
+        sup = getattr(self, "sup", None)
+        self.alarms.append(
+            {
+                "id": self.alarm_seq,
+                "t_s": round(sup.t, 3) if sup is not None else 0.0,
+                "kind": entry.get("kind", "alarm"),
+                "text": str(entry.get("error") or entry.get("text") or entry.get("kind")),
+                **({"robots": list(entry["robots"])} if "robots" in entry else {}),
+            }
+        )
         for o in self.observers:
             fn = getattr(o, "on_alarm", None)
             if fn is not None:
@@ -227,6 +256,20 @@ class Session:
         return outcome
 
     def teleop(self, robot: str, v: float, omega: float) -> Outcome:
+        released = self._released.get(robot)
+        if released is not None and self.clock() - released < TELEOP_DEADMAN_S:
+            # Release is final for commands issued before it: a request of the held stick
+            # still in flight when the operator let go must not take the skid back.
+            return self.command(
+                Outcome(
+                    False,
+                    "teleop",
+                    f"teleop.robot: robot {robot!r} was released "
+                    f"{self.clock() - released:.2f} s ago; take it over again after "
+                    f"{TELEOP_DEADMAN_S} s",
+                    self.sup.t,
+                )
+            )
         out = self.sup.set_teleop(robot, v, omega)
         if out.accepted:
             self._teleop[robot] = (v, omega, self.clock(), self.sup.t)
@@ -234,7 +277,57 @@ class Session:
 
     def release(self, robot: str) -> Outcome:
         self._teleop.pop(robot, None)
-        return self.command(self.sup.release(robot))
+        out = self.sup.release(robot)
+        if out.accepted:
+            self._released[robot] = self.clock()
+        return self.command(out)
+
+    def estop_now(self) -> Outcome:
+        """The e-stop, applied from any thread without waiting for the sim thread: the
+        latched flag (every later tick commands zero and holds) and a hold on the link for
+        every robot (the next step brakes them even if a tick is under way)."""
+        sup = self.sup
+        out = sup.estop()
+        with contextlib.suppress(Exception):  # the flag is set; the link is a second path
+            sup.link.stop(list(sup.ids))
+        self.encoder.metrics_now = True
+        return out
+
+    def stop_now(self, names) -> Outcome:
+        """Per-robot stop on the same unblocked path as the e-stop."""
+        sup = self.sup
+        out = sup.stop(names)
+        if out.accepted:
+            with contextlib.suppress(Exception):
+                sup.link.stop(list(out.detail.get("robots", [])))
+        self.encoder.metrics_now = True
+        return out
+
+    # ------------------------------------------------------------------ threads
+
+    def _sim_executor(self) -> ThreadPoolExecutor:
+        if self._sim_pool is None:
+            self._sim_pool = ThreadPoolExecutor(1, thread_name_prefix="swarmpark-sim")
+        return self._sim_pool
+
+    def _work_executor(self) -> ThreadPoolExecutor:
+        if self._work_pool is None:
+            self._work_pool = ThreadPoolExecutor(WORK_THREADS, thread_name_prefix="swarmpark-work")
+        return self._work_pool
+
+    async def on_sim(self, fn: Callable, *args, **kwargs):
+        """Run ``fn`` in the sim thread (between two ticks) and await its result."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(
+            self._sim_executor(), functools.partial(fn, *args, **kwargs)
+        )
+
+    async def off_loop(self, fn: Callable, *args, **kwargs):
+        """Run heavy ``fn`` in the work pool (neither the loop nor the ticks wait on it)."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(
+            self._work_executor(), functools.partial(fn, *args, **kwargs)
+        )
 
     def _keep_teleop_alive(self) -> None:
         """Re-send held teleop commands before the supervisor's own timeout (sim time) runs
@@ -254,16 +347,31 @@ class Session:
         """One fixed step of the core (timed for the status panel)."""
         self._keep_teleop_alive()
         t0, c0 = time.perf_counter(), time.process_time()
-        self.sup.tick()
+        step = self.sup.tick()
         self._ticks += 1
         if self._sync is not None:
             self._sync(self.sup)  # a real link's operator topics and visualization
         ms = (time.perf_counter() - t0) * 1e3
+        if step is not None and step.new_contacts and self.sup.teleop.any():
+            self._teleop_contacts(step.new_contacts)
         self.tick_ms.append(ms)
         self._tick_wall_ms += ms
         self._cpu_ms += (time.process_time() - c0) * 1e3
         for o in self.observers:
             o.on_tick(self.sup)
+
+    def _teleop_contacts(self, contacts) -> None:
+        """A contact of a teleoperated skid is an alarm (the monitor should have stopped it)."""
+        driven = {self.sup.ids[i] for i in np.flatnonzero(self.sup.teleop)}
+        for c in contacts:
+            if c.a in driven or c.b in driven:
+                self.alarm(
+                    {
+                        "kind": "teleop-contact",
+                        "text": f"{c.kind} contact under teleop: {c.a} - {c.b}",
+                        "robots": [r for r in (c.a, c.b) if r in self.sup.index],
+                    }
+                )
 
     def step(self, ticks: int) -> None:
         """Run ``ticks`` ticks now; a failing tick pauses the session with :attr:`error`."""
@@ -276,9 +384,14 @@ class Session:
 
     def _fail(self, exc: Exception) -> None:
         # Keep serving: the operator must see what happened, and may still reset or load.
+        # The skids are held on the link (a paused simulation does not move them either,
+        # but a link to real robots would keep the last commands alive until their
+        # dead-man); goals and groups are kept for a resume.
         log.exception("simulation tick failed")
         self.error = f"simulation stopped: {type(exc).__name__}: {exc}"
         self.paused = True
+        with contextlib.suppress(Exception):
+            self.sup.link.stop(list(self.sup.ids))
         self.alarm({"kind": "tick-error", "error": self.error})
 
     def due(self, wall_elapsed_s: float) -> int:
@@ -319,7 +432,9 @@ class Session:
                 "rate": round(self._rate, 2),
                 "tick_ms": round(float(np.mean(ticks)), 2) if ticks else None,
                 "error": self.error,
+                "estop": bool(self.sup.estopped),
             },
+            "alarms": list(self.alarms)[-10:],
         }
 
     def snapshot(self) -> dict:
@@ -328,58 +443,81 @@ class Session:
         _, full = enc.frame(self.sim_extra(), want_delta=False, want_full=True)
         return full  # type: ignore[return-value]
 
+    def encode(self, want_full: bool) -> tuple[str, str | None]:
+        """One frame as JSON text (the delta, and the full frame if asked); strict JSON."""
+        t0, c0 = time.perf_counter(), time.process_time()
+        self.seq += 1
+        delta, full = self.encoder.frame(self.sim_extra(), want_full=want_full)
+        d_msg = json.dumps(delta, separators=(",", ":"), allow_nan=False)
+        f_msg = (
+            json.dumps(full, separators=(",", ":"), allow_nan=False) if full is not None else None
+        )
+        self.frame_ms.append((time.perf_counter() - t0) * 1e3)
+        self._cpu_ms += (time.process_time() - c0) * 1e3
+        return d_msg, f_msg
+
+    def offer(self, d_msg: str, f_msg: str | None) -> int:
+        """Queue an encoded frame to every viewer (on the loop); returns the delta's bytes."""
+        clients = list(self.clients)
+        stride = -(-len(clients) // viewers.SENDS_PER_FRAME)
+        for c in clients:
+            if stride > 1 and (self.seq + c.slot) % stride:
+                c.needs_full = True  # not its turn: the next frame it gets is whole
+                continue
+            c.offer(d_msg, f_msg)
+            if c.overflows > MAX_OVERFLOWS:
+                c.closed = True
+                self.clients.discard(c)
+                log.warning("a viewer too slow for the frames was disconnected")
+        self.last_message_bytes = len(d_msg)
+        self.frames_sent += 1
+        return len(d_msg)
+
     def broadcast(self) -> int:
         """Encode one frame and queue it to every client; returns the delta's size in bytes."""
         if not self.clients:
             return 0
-        t0, c0 = time.perf_counter(), time.process_time()
-        self.seq += 1
-        want_full = any(c.needs_full for c in self.clients)
-        delta, full = self.encoder.frame(self.sim_extra(), want_full=want_full)
-        d_msg = json.dumps(delta, separators=(",", ":"))
-        f_msg = json.dumps(full, separators=(",", ":")) if full is not None else None
-        for c in self.clients:
-            c.offer(d_msg, f_msg)
-        self.last_message_bytes = len(d_msg)
-        self.frames_sent += 1
-        self.frame_ms.append((time.perf_counter() - t0) * 1e3)
-        self._cpu_ms += (time.process_time() - c0) * 1e3
-        return len(d_msg)
+        return self.offer(*self.encode(any(c.needs_full for c in self.clients)))
 
     def perf_report(self, frames: int | None = None) -> dict:
-        """Server load over the last ``frames`` (at most :data:`PERF_HISTORY`) paced frames."""
-        rows = list(self.perf)
-        if frames is not None:
-            rows = rows[-frames:] if frames > 0 else []
-        ticks = sum(r[0] for r in rows)
-        cpu = [r[1] for r in rows]
-        sizes = [r[2] for r in rows if r[2] > 0]
-        enc = [r[4] for r in rows if r[2] > 0]
-        return {
-            "frames": len(rows),
-            "ticks": ticks,
-            "clients": len(self.clients),
-            "robots": self.sup.n,
-            "cpu_ms_per_tick": round(sum(cpu) / ticks, 3) if ticks else None,
-            "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 3) if cpu else None,
-            "cpu_ms_per_frame_p99": round(float(np.percentile(cpu, 99)), 3) if cpu else None,
-            "cpu_ms_per_frame_max": round(max(cpu), 3) if cpu else None,
-            "tick_wall_ms_mean": round(sum(r[3] for r in rows) / ticks, 3) if ticks else None,
-            "encode_wall_ms_mean": round(float(np.mean(enc)), 3) if enc else None,
-            "message_bytes_mean": round(float(np.mean(sizes)), 1) if sizes else None,
-            "message_bytes_max": max(sizes) if sizes else None,
-            "process_cpu_s": round(time.process_time(), 4),
-            "frames_sent": self.frames_sent,
-            "frames_paced": self.frames_paced,
-            "sim_t_s": round(self.sup.t, 3),
-            "ticks_total": self._ticks,
-            "monotonic_s": round(time.monotonic(), 4),
-        }
+        """Server load over the last ``frames`` paced frames (:func:`.viewers.perf_report`)."""
+        return perf_report(self, frames)
 
     # ------------------------------------------------------------------ the pacing task
 
+    def _burst(self, n: int, period: float, want_frame: bool, want_full: bool):
+        """In the sim thread: up to ``n`` due ticks within one frame period, then the frame.
+
+        Returns ``(ticks run, delta message or None, full message or None)``."""
+        t_start = time.perf_counter()
+        self._tick_wall_ms = self._cpu_ms = 0.0
+        ran = 0
+        try:
+            for k in range(n):
+                if self.paused or self.error:
+                    break
+                if k and time.perf_counter() - t_start > period:
+                    # Ticks slower than real time: send a frame first and run the rest
+                    # later (the simulation falls behind, the view stays live).
+                    self._carry(n - k, 5 * period)
+                    break
+                self.tick()
+                ran += 1
+        except Exception as exc:
+            self._fail(exc)
+        d_msg = f_msg = None
+        if want_frame:
+            try:
+                d_msg, f_msg = self.encode(want_full)
+            except Exception as exc:  # a frame that cannot be sent must not stop the loop
+                self._fail(exc)
+        return ran, d_msg, f_msg
+
     async def run(self) -> None:
-        """Tick at the speed factor and broadcast at :data:`FRAME_HZ` until cancelled."""
+        """Tick at the speed factor and broadcast at :data:`FRAME_HZ` until cancelled.
+
+        The ticks and the frame run in the sim thread; this task only paces them and hands
+        the frames to the viewers, so requests are answered while a tick runs."""
         loop = asyncio.get_running_loop()
         period = 1.0 / FRAME_HZ
         last = loop.time()
@@ -388,31 +526,16 @@ class Session:
         while True:
             now = loop.time()
             elapsed, last = now - last, now
-            self._tick_wall_ms = self._cpu_ms = 0.0
-            ran = 0
             # After a stall (a laptop lid, a long plan) do not race to catch up.
             n = self.due(min(elapsed, 5 * period))
-            try:
-                for k in range(n):
-                    if self.paused or self.error:
-                        break
-                    if k:
-                        if loop.time() - now > period:
-                            # Ticks slower than real time: send a frame first and run the rest
-                            # later (the simulation falls behind, the view stays live).
-                            self._carry(n - k, 5 * period)
-                            break
-                        # Let waiting commands land between the ticks of a burst.
-                        await asyncio.sleep(0)
-                    self.tick()
-                    ran += 1
-            except Exception as exc:
-                self._fail(exc)
+            clients = list(self.clients)
+            want_full = any(c.needs_full for c in clients)
+            ran, d_msg, f_msg = await self.on_sim(self._burst, n, period, bool(clients), want_full)
             if now - rate_t >= 1.0:
                 sim_dt = self.sup.t - rate_sim
                 self._rate = sim_dt / (now - rate_t) if sim_dt >= 0 else 0.0
                 rate_t, rate_sim = now, self.sup.t
-            nbytes = self.broadcast()
+            nbytes = self.offer(d_msg, f_msg) if d_msg is not None else 0
             self.perf.append(
                 (
                     ran,
@@ -426,8 +549,7 @@ class Session:
             next_frame += period
             delay = next_frame - loop.time()
             if delay < MIN_YIELD_S:
-                # Behind: still give the loop a few milliseconds for I/O, so requests (an
-                # e-stop) are read and answered instead of waiting behind the ticks.
+                # Behind: still give the loop a few milliseconds for I/O (the viewers).
                 next_frame, delay = loop.time(), MIN_YIELD_S
             await asyncio.sleep(delay)
 
@@ -441,6 +563,10 @@ class Session:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
+        for pool in (self._sim_pool, self._work_pool):
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
+        self._sim_pool = self._work_pool = None
         self._end_observers()
         for o in self.observers:
             close = getattr(o, "close", None)

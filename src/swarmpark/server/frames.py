@@ -26,6 +26,8 @@ LOG_LENGTH = 40
 #: The metrics summary is recomputed every this many frames (it walks every robot).
 METRICS_EVERY = 10
 SLOW_KEYS = ("goals", "paths", "groups", "log", "metrics")
+#: Robot ids listed per log entry (the count is always given).
+LOG_ROBOTS = 8
 _STATE_CODE = {s: k for k, s in enumerate(ROBOT_STATES)}
 
 
@@ -193,6 +195,15 @@ class FrameEncoder:
                     "reason": o.reason,
                     "t_s": round(o.t_s, 2),
                     **({"robot": robot} if robot else {}),
+                    # Which skids a command applied to (the first few, and how many).
+                    **(
+                        {
+                            "robots": list(o.detail["robots"][:LOG_ROBOTS]),
+                            "n": len(o.detail["robots"]),
+                        }
+                        if o.detail and isinstance(o.detail.get("robots"), list)
+                        else {}
+                    ),
                 }
             )
         return list(shown)

@@ -100,6 +100,8 @@ class PreviewResult(BaseModel):
     goals: list[list[float]]  # [x_m, y_m, heading_deg]
     fill_order: list[int]
     report: dict[str, Any]
+    #: Per robot (in ``robots`` order), the index of the goal it would take.
+    goal_of: list[int] = []
 
 
 class SimStatus(BaseModel):
@@ -122,8 +124,13 @@ class ScenarioList(BaseModel):
 
 
 class AuthStatus(BaseModel):
+    """Whether this client may command: ``control`` is true if it holds the token (with
+    one) or the server's secret (without a token, when the server has one)."""
+
     token_required: bool
     control: bool
+    #: The server has a per-server secret (no token): the page must send it.
+    secret_required: bool = False
 
 
 # ----------------------------------------------------------------------------- GET /api/meta

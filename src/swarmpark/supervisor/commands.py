@@ -23,7 +23,7 @@ from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors, lowe
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
 
-__all__ = ["CommandsMixin", "Outcome", "ParkGroup", "FORMATION_GRACE_S"]
+__all__ = ["CommandsMixin", "Outcome", "ParkGroup", "ParkPlan", "FORMATION_GRACE_S"]
 
 #: A formation group keeps tracking its plan this long after the plan ends, then the
 #: navigation stack docks each skid exactly.
@@ -46,6 +46,15 @@ class Outcome:
             "t_s": round(self.t_s, 3),
             **({"detail": self.detail} if self.detail else {}),
         }
+
+
+@dataclass(frozen=True)
+class ParkPlan:
+    """A park command worked out but not committed (:meth:`CommandsMixin.prepare_park`)."""
+
+    group: ParkGroup
+    #: The run's lower bound on the time to park, if it has none yet.
+    lower_bound: float | None
 
 
 @dataclass
@@ -151,13 +160,16 @@ class CommandsMixin:
 
     def park(self, cmd: ParkCmd) -> Outcome:
         """Lay out goals in the boundary and assign them to the robots (all or nothing)."""
+        return self.apply_park(self.prepare_park(cmd))
+
+    def prepare_park(self, cmd: ParkCmd) -> ParkPlan | str:
+        """The heavy half of :meth:`park` (layout, costs, fill-order blockers, the lower
+        bound): reads the supervisor, changes nothing, so a server can run it off its sim
+        thread. Returns the plan or the reason it cannot be made."""
         try:
             idx, boundary, lay = self.plan_layout(cmd)
         except (ValueError, GeometryError) as exc:
-            return self._refuse("park", str(exc))
-        busy = [self.ids[i] for i in idx if self.teleop[i]]
-        if busy:
-            return self._refuse("park", f"park.robots: robot {busy[0]!r} is under teleop")
+            return str(exc)
         goals = np.asarray(lay.poses, float)
         fps = [self.info.footprints[i] for i in idx]
         fits = assign_mod.footprint_fits(
@@ -167,9 +179,7 @@ class CommandsMixin:
         try:
             goal_of = assign_mod.assign(cost)
         except assign_mod.AssignmentError as exc:
-            return self._refuse("park", str(exc))
-        # The command is good: drop these robots from other groups and from goto orders.
-        self._leave_groups(idx)
+            return str(exc)
         group = ParkGroup(
             idx,
             goals,
@@ -182,21 +192,38 @@ class CommandsMixin:
             goal_dims=tuple((f.length_m, f.width_m) for f in fps),
             blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
         )
-        self.groups.append(group)
-        self._set_goals(idx, goals[goal_of])
+        bound = None
         if self.metrics.lower_bound is None:
-            self.metrics.lower_bound = lower_bound_s(
+            bound = lower_bound_s(
                 self.world.grid,
                 self.truth_poses()[idx],
                 goals,
                 min(f.width_m for f in fps) / 2,
                 self.info.max_speed_mps[idx],
             )
+        return ParkPlan(group, bound)
+
+    def apply_park(self, plan: ParkPlan | str) -> Outcome:
+        """Commit a plan of :meth:`prepare_park` (cheap; refused if it went stale)."""
+        if isinstance(plan, str):
+            return self._refuse("park", plan)
+        group = plan.group
+        idx = group.robots
+        busy = [self.ids[i] for i in idx if self.teleop[i]]
+        if busy:
+            return self._refuse("park", f"park.robots: robot {busy[0]!r} is under teleop")
+        # The command is good: drop these robots from other groups and from goto orders.
+        self._leave_groups(idx)
+        self.groups.append(group)
+        goals = group.goals
+        self._set_goals(idx, goals[group.goal_of])
+        if self.metrics.lower_bound is None and plan.lower_bound is not None:
+            self.metrics.lower_bound = plan.lower_bound
         return self._accept(
             "park",
             robots=[self.ids[i] for i in idx],
-            method=lay.method,
-            goals=np.round(goals[goal_of], 4).tolist(),
+            method=group.method,
+            goals=np.round(goals[group.goal_of], 4).tolist(),
         )
 
     def _cost_matrix(self, idx: np.ndarray, goals: np.ndarray, cost: str, fits) -> np.ndarray:

@@ -23,7 +23,14 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from swarmpark.core.registry import Registry
-from swarmpark.world.scenario import COMMAND_KINDS, FormationCmd, GotoCmd, ParkCmd
+from swarmpark.world.scenario import (
+    COMMAND_KINDS,
+    FormationCmd,
+    GotoCmd,
+    ParkCmd,
+    RobotList,
+    RobotRef,
+)
 
 if TYPE_CHECKING:
     from swarmpark.supervisor.commands import Outcome
@@ -81,7 +88,7 @@ class FormationRequest(FormationCmd):
 class RobotsRequest(_Strict):
     """Robots to stop or resume: a list of ids, or ``"all"``."""
 
-    robots: Annotated[list[str], Field(min_length=1)] | Literal["all"]
+    robots: RobotList | Literal["all"]
 
 
 class TeleopRequest(_Strict):
@@ -90,15 +97,15 @@ class TeleopRequest(_Strict):
     applying the last command while the operator keeps sending it (a dead-man of
     ``TELEOP_DEADMAN_S`` wall seconds); then the skid stops and waits in teleop."""
 
-    robot: str
-    v_mps: Annotated[float, Field(allow_inf_nan=False)]
-    omega_radps: Annotated[float, Field(allow_inf_nan=False)]
+    robot: RobotRef
+    v_mps: Annotated[float, Field(allow_inf_nan=False, ge=-100.0, le=100.0)]
+    omega_radps: Annotated[float, Field(allow_inf_nan=False, ge=-100.0, le=100.0)]
 
 
 class ReleaseRequest(_Strict):
     """Hand a teleoperated robot back to autonomy."""
 
-    robot: str
+    robot: RobotRef
 
 
 @dataclass(frozen=True)

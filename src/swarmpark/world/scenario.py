@@ -11,13 +11,34 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from swarmpark.assign import ASSIGNMENT_COSTS as _COSTS
 from swarmpark.control.modes import AVOIDANCE_MODES
 from swarmpark.core.geometry import (
     Footprint,
     GeometryError,
+)
+from swarmpark.core.limits import (
+    MAX_COORDINATE_M,
+    MAX_DURATION_S,
+    MAX_FOOTPRINT_M,
+    MAX_HEADING_DEG,
+    MAX_ID_LENGTH,
+    MAX_POLYGON_VERTICES,
+    MAX_ROBOTS,
+    MAX_ROBOTS_PER_COMMAND,
+    MAX_TICKS,
+    MIN_DT_S,
+    MIN_RESOLUTION_M,
+    check_grid_cells,
 )
 from swarmpark.layout.methods import LAYOUT_METHODS as _METHODS
 
@@ -41,10 +62,45 @@ LAYOUT_METHODS = _METHODS.names()
 COMMAND_KINDS = ("park", "goto", "formation", "stop", "estop", "resume")
 ASSIGNMENT_COSTS = _COSTS.names()
 
-Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+# Every number at this edge is finite and bounded (core/limits.py): a NaN, an infinity or
+# 1e300 never reaches the core. The API's request models reuse these types.
+#: A coordinate in metres (map frame), within +-MAX_COORDINATE_M.
+Coord = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M)]
+#: A heading in degrees, within +-MAX_HEADING_DEG.
+HeadingDeg = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_HEADING_DEG, le=MAX_HEADING_DEG)]
+Point = Annotated[list[Coord], Field(min_length=2, max_length=2)]
 PoseDeg = Annotated[list[float], Field(min_length=3, max_length=3)]
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+#: A polygon (boundary, wall, obstacle) or a path: at most MAX_POLYGON_VERTICES points.
+Polygon = Annotated[list[Point], Field(max_length=MAX_POLYGON_VERTICES)]
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False, le=1e6)]
+NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False, le=1e6)]
+#: A robot or person id as referenced (commands, faults): bounded length.
+RobotRef = Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH)]
+#: A list of robots in one command.
+RobotList = Annotated[list[RobotRef], Field(min_length=1, max_length=MAX_ROBOTS_PER_COMMAND)]
+FootprintSide = Annotated[float, Field(gt=0, le=MAX_FOOTPRINT_M, allow_inf_nan=False)]
+
+
+def _pose(value: list[float]) -> list[float]:
+    """``[x_m, y_m, heading_deg]``: finite, coordinates and heading within the limits."""
+    x, y, h = value
+    for k, (v, bound) in enumerate(
+        ((x, MAX_COORDINATE_M), (y, MAX_COORDINATE_M), (h, MAX_HEADING_DEG))
+    ):
+        if v != v or v in (float("inf"), float("-inf")):
+            raise ValueError(f"[{k}] must be a finite number (got {v})")
+        if abs(v) > bound:
+            raise ValueError(f"[{k}] must be within +-{bound:g} (got {v})")
+    return value
+
+
+#: Scenario files larger than this are refused unread (the suite's largest is a few kB).
+MAX_SCENARIO_BYTES = 4 * 1024 * 1024
+
+
+#: libyaml's safe loader when PyYAML has it (same documents, tens of times faster on a long
+#: wall list), else the pure-Python one.
+_SafeLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 class ScenarioError(ValueError):
@@ -56,8 +112,8 @@ class _Model(BaseModel):
 
 
 class FootprintSpec(_Model):
-    length_m: PositiveFloat
-    width_m: PositiveFloat
+    length_m: FootprintSide
+    width_m: FootprintSide
     pivot_from_rear_m: NonNegFloat | None = None
 
     def build(self, field: str) -> Footprint:
@@ -76,7 +132,7 @@ class RobotDefaults(_Model):
 
 
 class RobotSpec(_Model):
-    id: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.\-]+$")]
+    id: Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH, pattern=r"^[A-Za-z0-9_.\-]+$")]
     pose: PoseDeg
     priority: NonNegFloat = 1.0
     footprint: FootprintSpec | None = None
@@ -85,12 +141,24 @@ class RobotSpec(_Model):
     max_yaw_rate_radps: PositiveFloat | None = None
     max_yaw_accel_radps2: PositiveFloat | None = None
 
+    _finite_pose = field_validator("pose")(classmethod(lambda cls, v: _pose(v)))
+
+
+#: Walls of a ``size_m`` map, all polygons together: at most this many vertices.
+MAX_WALL_VERTICES = 20 * MAX_POLYGON_VERTICES
+
 
 class MapSpec(_Model):
     yaml: str | None = None
-    size_m: Point | None = None
-    resolution_m: PositiveFloat = 0.05
-    walls: list[list[Point]] = []
+    size_m: (
+        Annotated[
+            list[Annotated[float, Field(gt=0, le=MAX_COORDINATE_M, allow_inf_nan=False)]],
+            Field(min_length=2, max_length=2),
+        ]
+        | None
+    ) = None
+    resolution_m: Annotated[float, Field(ge=MIN_RESOLUTION_M, le=100.0, allow_inf_nan=False)] = 0.05
+    walls: Annotated[list[Polygon], Field(max_length=MAX_POLYGON_VERTICES)] = []
 
     @model_validator(mode="after")
     def _one_form(self) -> MapSpec:
@@ -98,17 +166,24 @@ class MapSpec(_Model):
             raise ValueError("give either 'yaml' (a map_server file) or 'size_m' (+ walls)")
         if self.yaml is not None and self.walls:
             raise ValueError("'walls' go with 'size_m', not with a map_server 'yaml'")
+        if self.size_m is not None:
+            # Refuse a grid over the cell budget before anything is allocated.
+            shape = tuple(int(round(s / self.resolution_m)) for s in self.size_m[::-1])
+            check_grid_cells(shape, f"size_m {self.size_m} at resolution_m {self.resolution_m}")
+        n = sum(len(w) for w in self.walls)
+        if n > MAX_WALL_VERTICES:
+            raise ValueError(f"walls have {n} vertices in all, more than {MAX_WALL_VERTICES}")
         return self
 
 
 class StaticObstacleSpec(_Model):
-    polygon: list[Point]
+    polygon: Polygon
 
 
 class PersonSpec(_Model):
-    id: str | None = None
+    id: Annotated[str, Field(max_length=MAX_ID_LENGTH)] | None = None
     radius_m: PositiveFloat = 0.3
-    waypoints: Annotated[list[Point], Field(min_length=2)]
+    waypoints: Annotated[list[Point], Field(min_length=2, max_length=MAX_POLYGON_VERTICES)]
     speed_mps: PositiveFloat = 1.2
     start_s: NonNegFloat = 0.0
     loop: bool = False
@@ -126,18 +201,20 @@ class PersonSpec(_Model):
 
 
 class ParkCmd(_Model):
-    robots: Annotated[list[str], Field(min_length=1)]
-    boundary: list[Point]
-    heading_deg: float | Literal["auto"] = 0.0
+    robots: RobotList
+    boundary: Polygon
+    heading_deg: HeadingDeg | Literal["auto"] = 0.0
     method: Annotated[str, _METHODS.as_field()] = "stacking"
     margin_m: NonNegFloat = 0.3
     assignment: Annotated[str, _COSTS.as_field()] = "formation"
 
 
 class GotoCmd(_Model):
-    robot: str
+    robot: RobotRef
     pose: PoseDeg
     priority: NonNegFloat | None = None
+
+    _finite_pose = field_validator("pose")(classmethod(lambda cls, v: _pose(v)))
 
 
 class FormationCmd(_Model):
@@ -151,11 +228,14 @@ class FormationCmd(_Model):
     shape it starts in. The leader is the first robot.
     """
 
-    robots: Annotated[list[str], Field(min_length=2)]
-    paths: list[Annotated[list[Point], Field(min_length=2)]]
+    robots: Annotated[list[RobotRef], Field(min_length=2, max_length=MAX_ROBOTS_PER_COMMAND)]
+    paths: Annotated[
+        list[Annotated[list[Point], Field(min_length=2, max_length=MAX_POLYGON_VERTICES)]],
+        Field(max_length=MAX_ROBOTS_PER_COMMAND),
+    ]
     method: Literal["formation", "no_formation", "leader_follower"] = "formation"
-    offsets_m: list[list[float]] | list[list[list[float]]] | None = None
-    offset_at: list[float] | None = None
+    offsets_m: list[list[Coord]] | list[list[list[Coord]]] | None = None
+    offset_at: list[Annotated[float, Field(allow_inf_nan=False)]] | None = None
     dt_s: PositiveFloat = 1.0
     steps: Annotated[int, Field(ge=2, le=400)] | None = None
     d_safe_m: PositiveFloat | None = None
@@ -166,9 +246,9 @@ class CommandSpec(_Model):
     park: ParkCmd | None = None
     goto: GotoCmd | None = None
     formation: FormationCmd | None = None
-    stop: list[str] | Literal["all"] | None = None
+    stop: RobotList | Literal["all"] | None = None
     estop: Literal[True] | None = None
-    resume: list[str] | Literal["all"] | None = None
+    resume: RobotList | Literal["all"] | None = None
 
     @model_validator(mode="after")
     def _exactly_one(self) -> CommandSpec:
@@ -209,9 +289,11 @@ class KidnapSpec(_Model):
     """At ``at_s`` a skid is carried (by hand, without its odometry noticing) to ``pose``
     (x, y, heading in degrees); its filter must find it again."""
 
-    robot: str
+    robot: RobotRef
     at_s: NonNegFloat
     pose: PoseDeg
+
+    _finite_pose = field_validator("pose")(classmethod(lambda cls, v: _pose(v)))
 
 
 class SensingSpec(_Model):
@@ -240,7 +322,7 @@ class FaultSpec(_Model):
     them that late (so they may arrive out of order), ``noise_m`` / ``noise_deg`` add Gaussian
     noise (standard deviations) to the poses it reports. The e-stop is not affected."""
 
-    robot: str
+    robot: RobotRef
     from_s: NonNegFloat
     to_s: PositiveFloat
     drop: bool = False
@@ -275,19 +357,31 @@ class Scenario(_Model):
     #: sensing (``sensing``) and the start perturbations (``perturb``). Without either, the
     #: run is the same for every seed.
     seed: int = 0
-    dt_s: Annotated[float, Field(gt=0, le=0.5)] = 0.05
-    duration_s: PositiveFloat = 180.0
+    dt_s: Annotated[float, Field(ge=MIN_DT_S, le=0.5, allow_inf_nan=False)] = 0.05
+    duration_s: Annotated[float, Field(gt=0, le=MAX_DURATION_S, allow_inf_nan=False)] = 180.0
     map: MapSpec
     robot_defaults: RobotDefaults = RobotDefaults()
-    robots: Annotated[list[RobotSpec], Field(min_length=1)]
-    obstacles: list[StaticObstacleSpec | PersonSpec] = []
-    commands: list[CommandSpec] = []
+    robots: Annotated[list[RobotSpec], Field(min_length=1, max_length=MAX_ROBOTS)]
+    obstacles: Annotated[
+        list[StaticObstacleSpec | PersonSpec], Field(max_length=MAX_POLYGON_VERTICES)
+    ] = []
+    commands: Annotated[list[CommandSpec], Field(max_length=10_000)] = []
     navigation: NavigationSpec = NavigationSpec()
     sensing: SensingSpec = SensingSpec()
     #: Faults injected on the simulator's robot link (drops, delays, noise).
     faults: list[FaultSpec] = []
     perturb: PerturbSpec = PerturbSpec()
     expect: ExpectSpec = ExpectSpec()
+
+    @model_validator(mode="after")
+    def _run_ends(self) -> Scenario:
+        ticks = self.duration_s / self.dt_s
+        if ticks > MAX_TICKS:
+            raise ValueError(
+                f"duration_s {self.duration_s} at dt_s {self.dt_s} is {ticks:.3g} ticks, "
+                f"more than {MAX_TICKS}"
+            )
+        return self
 
 
 # ----------------------------------------------------------------------------- loading
@@ -311,10 +405,14 @@ def _format_validation(exc: ValidationError) -> str:
     err = min(errs, key=lambda e: (e["type"] == "extra_forbidden" and len(errs) > 1, len(e["loc"])))
     field = _loc(err["loc"])
     if err["type"] == "extra_forbidden":
-        return f"{field}: unknown key (value {err['input']!r})"
+        shown = repr(err["input"])
+        shown = shown if len(shown) <= 120 else shown[:117] + "..."
+        return f"{field}: unknown key (value {shown})"
     msg = err["msg"].removeprefix("Value error, ")
     value = err.get("input")
     shown = repr(value) if not isinstance(value, dict) else "{" + ", ".join(map(str, value)) + "}"
+    if len(shown) > 120:  # one readable line, whatever the file holds
+        shown = shown[:117] + "..."
     extra = f" ({len(errs) - 1} more error(s))" if len(errs) > 1 else ""
     return f"{field}: {msg} (got {shown}){extra}"
 
@@ -341,11 +439,24 @@ def load_scenario(path: str | Path) -> Scenario:
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"scenario: file not found: {str(path)!r}")
+    size = path.stat().st_size
+    if size > MAX_SCENARIO_BYTES:
+        raise ScenarioError(
+            f"scenario: {str(path)!r} is {size} bytes, more than {MAX_SCENARIO_BYTES}"
+        )
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.load(path.read_bytes().decode("utf-8"), Loader=_SafeLoader)
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"scenario: {str(path)!r} is not UTF-8 text ({exc})") from None
     except yaml.YAMLError as exc:
-        raise ScenarioError(f"scenario: {str(path)!r} is not valid YAML: {exc}") from None
-    return parse_scenario(data, path.parent)
+        where = " ".join(str(exc).split())  # one line
+        raise ScenarioError(f"scenario: {str(path)!r} is not valid YAML: {where}") from None
+    except RecursionError:
+        raise ScenarioError(f"scenario: {str(path)!r} is nested too deeply") from None
+    try:
+        return parse_scenario(data, path.parent)
+    except RecursionError:
+        raise ScenarioError(f"scenario: {str(path)!r} is nested too deeply") from None
 
 
 # The world built from a scenario lives in world/build.py; its names stay importable from here.

@@ -156,6 +156,15 @@ class Navigator:
             r.stall.update(p.stall, cmd[i], r.dock.docked, view.dt)
         return cmd
 
+    def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
+        """Commands ``raw`` of skids ``idx`` not driven by this controller (teleop), scaled
+        down by the collision monitor until their short forward simulation is free."""
+        while len(self.robots) < len(view.poses):
+            self.robots.append(RobotNav())
+        self.scene.update(view)
+        idx = np.asarray(idx, int)
+        return self.monitor.check(view, idx, np.asarray(raw, float), self.scene).commands
+
     def _monitor(self, view: ControlView, idx: np.ndarray, raw: np.ndarray, **kw) -> np.ndarray:
         """The monitor's safe commands; it also tells give-way who held each skid up."""
         res: MonitorResult = self.monitor.check(view, idx, raw, self.scene, **kw)

@@ -61,7 +61,7 @@ async def set_sim(req: SimControlRequest, session: SessionDep):
 )
 async def step(req: StepRequest, session: SessionDep):
     """A tick that fails pauses the simulation: 500 with the error (also in GET /api/sim)."""
-    session.step(req.ticks)
+    await session.on_sim(session.step, req.ticks)
     if session.error:
         raise HTTPException(500, session.error)
     return session.status()
@@ -75,7 +75,7 @@ async def step(req: StepRequest, session: SessionDep):
     summary="Start the current scenario over",
 )
 async def reset(session: SessionDep):
-    session.reset()
+    await session.on_sim(session.reset)
     return session.status()
 
 
@@ -104,7 +104,8 @@ async def load(req: ScenarioRequest, request: Request, session: SessionDep):
     if req.name not in list_scenarios(directory):
         raise HTTPException(404, f"name: no scenario {req.name!r} in {str(directory)!r}")
     try:
-        session.load(directory / req.name, scripted=req.scripted)
+        built = await session.off_loop(session.build, directory / req.name, scripted=req.scripted)
     except ScenarioError as exc:
         raise HTTPException(409, f"{req.name}: {exc}") from None
+    await session.on_sim(session.install, *built)
     return session.status()

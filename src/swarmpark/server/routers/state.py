@@ -11,7 +11,8 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import Response
 
-from swarmpark.server.deps import SessionDep, has_control
+from swarmpark.core.limits import MAX_VIEWERS
+from swarmpark.server.deps import SessionDep, has_control, has_secret
 from swarmpark.server.engine import Client, Session
 from swarmpark.server.schemas import AuthStatus
 
@@ -45,7 +46,7 @@ async def map_image(session: SessionDep):
 @router.get("/state", summary="The current state as one full frame")
 async def state(session: SessionDep) -> dict:
     """Same content as a full WebSocket frame (see docs/ui.md for the fields)."""
-    return session.snapshot()
+    return await session.on_sim(session.snapshot)
 
 
 @router.get("/perf", summary="Server load: CPU per tick, frame sizes, tick times")
@@ -61,8 +62,12 @@ async def perf(
 
 @router.get("/auth", response_model=AuthStatus, summary="Does this client hold the token?")
 async def auth(request: Request):
+    token = request.app.state.token
+    secret = getattr(request.app.state, "secret", None)
     return AuthStatus(
-        token_required=request.app.state.token is not None, control=has_control(request)
+        token_required=token is not None,
+        control=has_control(request) and (token is not None or has_secret(request)),
+        secret_required=token is None and secret is not None,
     )
 
 
@@ -73,17 +78,29 @@ async def stream(ws: WebSocket):
     The stream is read-only; commands go through the REST endpoints.
     """
     session: Session = ws.app.state.session
+    if len(session.clients) >= MAX_VIEWERS:
+        # Refused before it costs anything (1013: try again later).
+        await ws.close(code=1013, reason=f"viewers: {MAX_VIEWERS} already connected")
+        return
     await ws.accept()
     client = Client()
     session.clients.add(client)
     # A viewer that joins while nothing runs (a paused sim, no pacing task) sees the state.
     # (A fresh encoder: the broadcast's change tracking stays as the other viewers saw it.)
-    await ws.send_text(json.dumps(session.snapshot(), separators=(",", ":")))
+    first = await session.on_sim(session.snapshot)
+    await ws.send_text(json.dumps(first, separators=(",", ":"), allow_nan=False))
     client.needs_full = False
 
     async def sender() -> None:
-        while True:
-            await ws.send_text(await client.queue.get())
+        # A viewer too slow to drain its queue is dropped from the broadcast by the session
+        # (client.closed) and its connection closed here.
+        while not client.closed:
+            try:
+                msg = await asyncio.wait_for(client.queue.get(), 1.0)
+            except TimeoutError:
+                continue
+            await ws.send_text(msg)
+            client.overflows = 0  # it keeps up
 
     async def receiver() -> None:
         with contextlib.suppress(WebSocketDisconnect):

@@ -28,6 +28,10 @@ const S = {
   pan: null,
   mouse: null,          // last mouse position in world coordinates
   token: sessionStorage.getItem("swarmpark-token") || "",
+  secret: sessionStorage.getItem("swarmpark-secret") || "",
+  secretRequired: false,
+  lastFrameAt: 0,       // performance.now() of the last frame (stale-link banner)
+  estopSent: null,      // {at, state: "sent"|"acknowledged"|"applied"|"failed"}
   control: true,
   tokenRequired: false,
   teleop: { robot: null, keys: new Set(), timer: null, last: [0, 0] },
@@ -57,6 +61,7 @@ function rad(d) { return (d * Math.PI) / 180; }
 async function api(path, body, method = "POST") {
   const headers = { "Content-Type": "application/json" };
   if (S.token) headers.Authorization = "Bearer " + S.token;
+  if (S.secret) headers["X-Swarmpark-Secret"] = S.secret;
   let res;
   try {
     res = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
@@ -247,7 +252,10 @@ function draw() {
     drawFootprint(i, g[0], g[1], g[2], null, STATE_COLOURS[states[i]] || "#ccc", 1.2, [4, 3]);
   });
 
-  // Skids: footprint coloured by state, heading arrow, id.
+  // Skids: footprint coloured by state, heading arrow, id (labels never overlap: a label
+  // with no free place is left out; the table and a hover still name the skid).
+  const placed = [];
+  const free = (x, y, w2, h2) => !placed.some(([a, b, c, d]) => x - w2 < c && x + w2 > a && y - h2 < d && y + h2 > b);
   f.robots.forEach((r, i) => {
     const [x, y, hd] = r;
     const selected = S.selection.has(S.world.robots[i].id);
@@ -261,7 +269,11 @@ function draw() {
     ctx.lineWidth = 3; ctx.strokeStyle = "rgba(0,0,0,0.8)";
     const label = S.world.robots[i].id;
     const off = S.world.robots[i].width_m * 0.5 * S.view.scale + 9;
-    ctx.strokeText(label, sx, sy - off); ctx.fillStyle = "#fff"; ctx.fillText(label, sx, sy - off);
+    const w2 = ctx.measureText(label).width / 2 + 2, h2 = 8;
+    const spot = [[sx, sy - off], [sx, sy + off], [sx, sy]].find(([x, y]) => free(x, y, w2, h2));
+    if (!spot) return;
+    placed.push([spot[0] - w2, spot[1] - h2, spot[0] + w2, spot[1] + h2]);
+    ctx.strokeText(label, spot[0], spot[1]); ctx.fillStyle = "#fff"; ctx.fillText(label, spot[0], spot[1]);
   });
 
   // People (moving obstacles).
@@ -273,6 +285,31 @@ function draw() {
   });
 
   drawOperatorLayer();
+  drawScaleAndLegend(w, h);
+}
+
+function drawScaleAndLegend(w, h) {
+  // Scale bar: a round length (1, 2 or 5 x 10^k m) about 100 px long.
+  const target = 100 / S.view.scale;
+  const p = Math.pow(10, Math.floor(Math.log10(target)));
+  const len = [1, 2, 5, 10].map((k) => k * p).find((v) => v >= target) || p;
+  const px = len * S.view.scale, x0 = 10, y0 = h - 28;
+  ctx.fillStyle = "rgba(0,0,0,0.55)"; ctx.fillRect(x0 - 4, y0 - 14, px + 8, 22);
+  ctx.strokeStyle = "#fff"; ctx.lineWidth = 2;
+  ctx.beginPath(); ctx.moveTo(x0, y0 - 4); ctx.lineTo(x0, y0); ctx.lineTo(x0 + px, y0); ctx.lineTo(x0 + px, y0 - 4); ctx.stroke();
+  ctx.fillStyle = "#fff"; ctx.font = "11px system-ui, sans-serif"; ctx.textAlign = "center"; ctx.textBaseline = "bottom";
+  ctx.fillText(`${len >= 1 ? len : len.toFixed(2)} m`, x0 + px / 2, y0 - 2);
+  // Legend: the state colours, then people and obstacles.
+  const items = [...Object.entries(STATE_COLOURS), ["person", "#ff5a3c"], ["obstacle", "#f0a020"], ["preview", "#ff78ff"]];
+  ctx.font = "11px system-ui, sans-serif"; ctx.textAlign = "left"; ctx.textBaseline = "middle";
+  const lw = 84, lx = w - lw - 8;
+  let ly = 10;
+  ctx.fillStyle = "rgba(0,0,0,0.55)"; ctx.fillRect(lx - 4, ly - 4, lw + 4, items.length * 14 + 6);
+  for (const [name, colour] of items) {
+    ctx.fillStyle = colour; ctx.fillRect(lx, ly + 2, 9, 9);
+    ctx.fillStyle = "#ddd"; ctx.fillText(name, lx + 14, ly + 7);
+    ly += 14;
+  }
 }
 
 function remainingPath(flat, robot) {
@@ -320,12 +357,32 @@ function drawOperatorLayer() {
   }
   if (S.preview && S.preview.goals) {
     const order = S.preview.robots.map((id) => ids().indexOf(id));
+    const goalOf = S.preview.goal_of || [];
+    const robotOfGoal = new Map(goalOf.map((g, k) => [g, order[k]]));
+    const rank = new Map((S.preview.fill_order || []).map((g, k) => [g, k + 1]));
     S.preview.goals.forEach((g, k) => {
-      const i = order[k] >= 0 ? order[k] : 0;
+      const i = robotOfGoal.has(k) ? robotOfGoal.get(k) : (order[k] >= 0 ? order[k] : 0);
       drawFootprint(i, g[0], g[1], g[2], "rgba(255,120,255,0.18)", "#ff78ff", 1.5, [5, 3]);
       const [cx, cy] = centre(i, g[0], g[1], g[2]);
       drawArrow(cx, cy, g[2], Math.max(6, 0.4 * S.view.scale), "#ff78ff", 1.5);
+      if (rank.has(k)) {  // the fill order: 1 is parked first
+        const [sx, sy] = toScreen(cx, cy);
+        ctx.font = "bold 12px system-ui, sans-serif"; ctx.textAlign = "center"; ctx.textBaseline = "middle";
+        ctx.lineWidth = 3; ctx.strokeStyle = "#000"; ctx.strokeText(String(rank.get(k)), sx, sy);
+        ctx.fillStyle = "#ff78ff"; ctx.fillText(String(rank.get(k)), sx, sy);
+      }
     });
+    // Which skid goes to which spot.
+    if (S.frame) {
+      ctx.setLineDash([3, 4]); ctx.strokeStyle = "rgba(255,120,255,0.7)"; ctx.lineWidth = 1.2;
+      goalOf.forEach((gk, k) => {
+        const i = order[k], r = S.frame.robots[i], g = S.preview.goals[gk];
+        if (i < 0 || !r || !g) return;
+        const [ax, ay] = toScreen(r[0], r[1]), [bx, by] = toScreen(g[0], g[1]);
+        ctx.beginPath(); ctx.moveTo(ax, ay); ctx.lineTo(bx, by); ctx.stroke();
+      });
+      ctx.setLineDash([]);
+    }
   }
   if (!d) return;
   if (d.kind === "polygon" && d.pts.length) {
@@ -367,6 +424,22 @@ function updatePanels() {
   $("sim-speed").title = "achieved " + (sim.rate ?? 0) + " sim s per s; tick " + (sim.tick_ms ?? "-") + " ms";
   $("estop").classList.toggle("latched", !!f.estop);
   $("estop-banner").classList.toggle("hidden", !f.estop);
+  if (S.estopSent && S.estopSent.state !== "applied" && f.estop && f.robots.every((r) => r[4] === 0)) {
+    S.estopSent.state = "applied";
+    S.estopSent.appliedMs = Math.round(performance.now() - S.estopSent.at);
+    showEstopState();
+  } else if (!f.estop && S.estopSent && S.estopSent.state === "applied") {
+    S.estopSent = null; showEstopState();
+  }
+  $("sim-speed").textContent += ` (${(sim.rate ?? 0).toFixed(2)}x)`;
+  const alarms = f.alarms || [];
+  $("alarm-count").textContent = alarms.length ? `(${alarms.length})` : "(none)";
+  $("alarms").innerHTML = "";
+  for (const a of [...alarms].reverse()) {
+    const li = document.createElement("li");
+    li.textContent = `${a.t_s.toFixed(1)} s  ${a.kind}${a.robots ? " " + a.robots.join(", ") : ""}: ${a.text}`;
+    $("alarms").appendChild(li);
+  }
   $("error-banner").classList.toggle("hidden", !sim.error);
   $("error-banner").textContent = sim.error || "";
 
@@ -410,7 +483,8 @@ function updatePanels() {
     for (const o of [...f.log].reverse()) {
       const li = document.createElement("li");
       li.className = o.accepted ? "ok" : "refused";
-      li.textContent = `${o.t_s.toFixed(1)} s  ${o.command}${o.robot ? " " + o.robot : ""}: ` +
+      const who = o.robots ? " " + o.robots.join(", ") + (o.n > o.robots.length ? ` +${o.n - o.robots.length}` : "") : "";
+      li.textContent = `${o.t_s.toFixed(1)} s  ${o.command}${o.robot ? " " + o.robot : ""}${who}: ` +
         (o.accepted ? "accepted" : "refused: " + o.reason);
       $("log").appendChild(li);
     }
@@ -682,8 +756,23 @@ window.addEventListener("blur", () => S.teleop.keys.clear());
 
 async function estop() {
   // No token needed: any console may stop the swarm.
+  S.estopSent = { at: performance.now(), state: "sent" };
+  showEstopState();
   const r = await api("/api/estop", undefined);
-  if (!r.ok) toast("E-STOP FAILED: " + why(r));
+  if (!r.ok) { S.estopSent.state = "failed"; toast("E-STOP FAILED: " + why(r)); }
+  else if (S.estopSent.state === "sent") S.estopSent.state = "acknowledged";
+  showEstopState();
+}
+
+// Sent -> acknowledged (the server answered) -> applied (a frame shows every skid halted).
+function showEstopState() {
+  const e = S.estopSent, el = $("estop-state");
+  if (!e) { el.textContent = ""; return; }
+  const ms = Math.round(performance.now() - e.at);
+  el.textContent = { sent: "sent…", acknowledged: "acknowledged", applied: "applied: all halted", failed: "NOT SENT" }[e.state]
+    + (e.state === "applied" ? ` (${e.appliedMs} ms)` : "");
+  el.className = e.state;
+  if (e.state === "sent" && ms > 1000) el.textContent = "sent, no answer yet…";
 }
 
 async function togglePause() {
@@ -807,8 +896,15 @@ async function checkAuth() {
   const r = await api("/api/auth", undefined, "GET");
   if (!r.ok) return;
   S.tokenRequired = r.data.token_required;
+  S.secretRequired = !!r.data.secret_required;
   S.control = r.data.control;
   $("auth").classList.toggle("hidden", !S.tokenRequired);
+  // Say why this viewer is read-only (the e-stop still works).
+  let why_ro = "";
+  if (!S.control && S.tokenRequired) why_ro = S.token ? "the token was refused: read-only (E-STOP still works)" : "read-only: enter the token to command (E-STOP still works)";
+  else if (!S.control && S.secretRequired) why_ro = S.secret ? "the server's secret was refused: read-only (E-STOP still works)" : "read-only: open the URL that swarmpark serve printed to command (E-STOP still works)";
+  $("ro-banner").textContent = why_ro;
+  $("ro-banner").classList.toggle("hidden", !why_ro);
   $("auth-badge").textContent = S.control ? "control" : "read-only";
   $("auth-badge").className = "badge " + (S.control ? "" : "warn");
   document.querySelectorAll("button.ctl, select, input").forEach((el) => {
@@ -896,6 +992,7 @@ async function onFrame(msg) {
   const f = { ...msg };
   for (const k of ["goals", "paths", "groups", "log", "metrics"]) if (!(k in msg) && k in prev) f[k] = prev[k];
   S.frame = f;
+  S.lastFrameAt = performance.now();
   S.frames.push({ t_s: f.t_s, estop: f.estop, robots: f.robots });
   if (S.frames.length > 400) S.frames.splice(0, S.frames.length - 400);
   updatePanels();
@@ -914,17 +1011,33 @@ function connect() {
   };
 }
 
-// The token may come in the page URL once (?token=...): keep it for this tab, hide it.
+// The token or the server's secret may come in the page URL once (?token=..., ?secret=...):
+// keep them for this tab, hide them.
 (function takeTokenFromUrl() {
   const u = new URL(location.href);
-  const t = u.searchParams.get("token");
-  if (t) {
-    S.token = t;
-    sessionStorage.setItem("swarmpark-token", t);
-    u.searchParams.delete("token");
-    history.replaceState(null, "", u.toString());
+  for (const [key, field] of [["token", "token"], ["secret", "secret"]]) {
+    const t = u.searchParams.get(key);
+    if (t) {
+      S[field] = t;
+      sessionStorage.setItem("swarmpark-" + key, t);
+      u.searchParams.delete(key);
+    }
   }
+  history.replaceState(null, "", u.toString());
 })();
+
+// Stale link: no frame for a second means the picture is old, whatever the socket says.
+const STALE_MS = 1000;
+setInterval(() => {
+  const age = S.lastFrameAt ? performance.now() - S.lastFrameAt : 0;
+  const stale = S.lastFrameAt && age > STALE_MS;
+  $("stale-banner").classList.toggle("hidden", !stale);
+  if (stale) {
+    $("stale-banner").textContent = `No data from the server for ${(age / 1000).toFixed(1)} s: the view is stale.`;
+    $("conn").textContent = "stale"; $("conn").className = "badge bad";
+  } else if ($("conn").textContent === "stale") { $("conn").textContent = "live"; $("conn").className = "badge"; }
+  if (S.estopSent && S.estopSent.state === "sent") showEstopState();
+}, 250);
 
 // For end-to-end tests and debugging: the view transform and the latest state.
 window.swarmpark = { S, toScreen, toWorld, fit };
