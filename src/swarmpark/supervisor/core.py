@@ -25,7 +25,6 @@ from swarmpark.metrics import (
     POSITION_TOL_M,
     MetricsRecorder,
     goal_errors,
-    lower_bound_s,
 )
 from swarmpark.sim.simulator import Simulator
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd, World
@@ -290,14 +289,13 @@ class Supervisor:
         )
         self.groups.append(group)
         self._set_goals(idx, goals[goal_of])
-        if self.metrics.lower_bound is None:
-            self.metrics.lower_bound = lower_bound_s(
-                self.world.grid,
-                self.sim.poses[idx],
-                goals,
-                min(f.width_m for f in fps) / 2,
-                self.sim.max_speed[idx],
-            )
+        self.metrics.defer_lower_bound(
+            self.world.grid,
+            self.sim.poses[idx],
+            goals,
+            min(f.width_m for f in fps) / 2,
+            self.sim.max_speed[idx],
+        )
         return self._accept(
             "park",
             robots=[self.ids[i] for i in idx],
