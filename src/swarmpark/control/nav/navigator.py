@@ -123,7 +123,7 @@ class Navigator:
         self.planner.update(view, paths, self.follower)
         targets, final = self.follower.targets(view, idx, paths)
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
-        waiting = np.array([not paths[i].is_for(view.goals[i]) for i in idx])
+        waiting = self.follower.waiting(view, idx, paths)
         reverse = self.follower.update_ends(view, idx, final, paths)
         raw, dist_goal = self.field.drive(
             view, idx, scene, targets, reverse, final, p.follower.approach_m
