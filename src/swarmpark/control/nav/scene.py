@@ -34,14 +34,16 @@ def sample_polygon(corners: np.ndarray, step_m: float) -> tuple[list[np.ndarray]
 
 @dataclass
 class StaticSolids:
-    """The known static solids ``(S, 4, 2)``: outline samples, a k-d tree of them and an
-    STR-tree of the pieces' boxes; the ORCA obstacles are made on first use."""
+    """The known static solids ``(S, 4, 2)``: outline samples, a k-d tree of them, the pieces'
+    boxes (``lo``, ``hi``) and an STR-tree of them; the ORCA obstacles are made on first use."""
 
     pieces: np.ndarray
     step_m: float
     points: np.ndarray = field(init=False)
     kd: cKDTree | None = field(init=False)
     tree: shapely.STRtree = field(init=False)
+    lo: np.ndarray = field(init=False)
+    hi: np.ndarray = field(init=False)
     _orca: list | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
@@ -51,7 +53,7 @@ class StaticSolids:
             pts += sample_polygon(piece, self.step_m)[0]
         self.points = np.vstack(pts) if pts else np.zeros((0, 2))
         self.kd = cKDTree(self.points) if len(self.points) else None
-        lo, hi = self.pieces.min(axis=1), self.pieces.max(axis=1)
+        self.lo, self.hi = lo, hi = self.pieces.min(axis=1), self.pieces.max(axis=1)
         self.tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
 
     def same(self, pieces: np.ndarray) -> bool:
