@@ -35,7 +35,8 @@ class PathGeometry:
 @dataclass
 class PathState:
     """One skid's plan: the path (world points), the goal it was planned for and when, whether
-    planning failed, and which end leads (``reverse``: the rear)."""
+    planning failed, and which end leads (``reverse``: the rear). ``path`` and ``path_goal``
+    are replaced on a new plan, never changed in place (caches go by identity)."""
 
     path: np.ndarray | None = None
     path_goal: np.ndarray | None = None

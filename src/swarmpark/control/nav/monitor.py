@@ -205,7 +205,12 @@ class CollisionMonitor:
         lens = np.fromiter(map(len, cand), int, len(cand))
         ib = np.fromiter(itertools.chain.from_iterable(cand), int, int(lens.sum()))
         ia = np.repeat(np.arange(len(idx)), lens)
-        near = np.linalg.norm(xy[idx[ia]] - xy[ib], axis=1) < rng
+        dist = np.linalg.norm(xy[idx[ia]] - xy[ib], axis=1)
+        # Only skids whose discs around the pivot (through the farthest corner) meet can
+        # overlap: the exact test is left for those.
+        r_a = np.linalg.norm(corners - xy[idx, None], axis=2).max(axis=1)
+        r_b = np.linalg.norm(others - xy[:, None], axis=2).max(axis=1)
+        near = (dist < rng) & (dist <= r_a[ia] + r_b[ib] + 1e-6)
         near &= idx[ia] != ib
         ia, ib = ia[near], ib[near]
         if len(ia):
