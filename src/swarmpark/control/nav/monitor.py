@@ -102,7 +102,7 @@ class CollisionMonitor:
         owner = np.repeat(np.arange(n_act), S * T)
         corners = footprint_corners(pose, np.repeat(body, S * T, axis=0))
         bad = self._hits_static(view, corners, scene, group=S * T)
-        blockers = self._hits_skids(view, idx, corners, owner, bad, others, robots)
+        blockers = self._hits_skids(view, idx, corners, owner, bad, others, scene, robots)
         self._hits_people(view, corners, n_act, bad)
         bad = bad.reshape(n_act, S, T)
         # The fastest safe scale; if even turning in place collides, stop turning as well.
@@ -139,7 +139,7 @@ class CollisionMonitor:
             bad[qi[hit]] = True
         return bad
 
-    def _hits_skids(self, view, idx, corners, owner, bad, others, robots: bool):
+    def _hits_skids(self, view, idx, corners, owner, bad, others, scene: Scene, robots: bool):
         """Mark (in ``bad``) footprints overlapping other skids where they stand (``others``:
         their corners); returns per robot row the skids hit at full speed."""
         S, T = len(self.scales), len(self.times)
@@ -148,7 +148,7 @@ class CollisionMonitor:
             return blockers
         centres = corners.mean(axis=1)
         other_c = others.mean(axis=1)
-        radius = max(f.circumradius_m for f in view.footprints) * 2 + self.params.margin_m
+        radius = scene.skids.max_circumradius * 2 + self.params.margin_m
         # One search per skid, around its first rollout pose and wide enough for its whole
         # rollout; then the footprint-skid pairs closer than ``radius`` (as one search per
         # footprint would find them).

@@ -79,7 +79,8 @@ class StaticSolids:
 @dataclass
 class SkidOutlines:
     """The skids' footprints: outline samples in the body frame with their owners, the plain
-    corners ``(N, 4, 2)`` and the corners grown by the monitor's margin."""
+    corners ``(N, 4, 2)``, the corners grown by the monitor's margin, and each footprint's
+    reach about its pivot ``(N,)`` and the largest circumradius (computed once per fleet)."""
 
     footprints: tuple[Footprint, ...]
     step_m: float
@@ -88,8 +89,12 @@ class SkidOutlines:
     owner: np.ndarray = field(init=False)
     plain: np.ndarray = field(init=False)
     grown: np.ndarray = field(init=False)
+    reach: np.ndarray = field(init=False)
+    max_circumradius: float = field(init=False)
 
     def __post_init__(self) -> None:
+        self.reach = np.array([f.reach_m for f in self.footprints])
+        self.max_circumradius = max(f.circumradius_m for f in self.footprints)
         pts, owner = [], []
         for j, fp in enumerate(self.footprints):
             edge_pts, counts = sample_polygon(fp.corners_body(), self.step_m)
