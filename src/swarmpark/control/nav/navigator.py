@@ -151,9 +151,11 @@ class Navigator:
             raw = self.give_way.step(view, idx, raw, dist_goal, self._states("give_way"), docked)
             cmd[idx] = self._monitor(view, idx, raw)
         hold_outside(view, idx, cmd, p.hold)
-        for i in idx:  # how long the monitor or the field has kept a skid (nearly) still
-            r = self.robots[i]
-            r.stall.update(p.stall, cmd[i], r.dock.docked, view.dt)
+        # How long the monitor or the field has kept each skid (nearly) still.
+        robots = [self.robots[i] for i in idx]
+        StallWatch.update_all(
+            p.stall, [r.stall for r in robots], cmd[idx], [r.dock.docked for r in robots], view.dt
+        )
         return cmd
 
     def _monitor(self, view: ControlView, idx: np.ndarray, raw: np.ndarray, **kw) -> np.ndarray:
