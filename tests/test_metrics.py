@@ -93,3 +93,22 @@ def test_lower_bound_goes_around_a_wall():
     true_len = hull.exterior.length - 5.0
     assert lb is not None
     assert 0.9 * true_len / 0.5 < lb <= true_len / 0.5  # a bound, and a tight one
+
+
+def test_lower_bound_is_computed_lazily_from_the_first_park_command_with_one():
+    from swarmpark.metrics import MetricsRecorder
+
+    world = make_world(map={"size_m": [10, 6], "resolution_m": 0.05})
+    starts = np.array([[2.0, 1.0, 0.0]])
+    goals = np.array([[7.0, 1.0, 0.0]])
+    rec = MetricsRecorder(["a"], starts)
+    assert rec.lower_bound is None  # no park command yet
+    # A goal that cannot be reached gives no bound; the next command's inputs are used.
+    rec.defer_lower_bound(world.grid, starts, np.array([[20.0, 1.0, 0.0]]), 0.4, [0.5])
+    moved = starts.copy()
+    rec.defer_lower_bound(world.grid, moved, goals, 0.4, np.array([0.5]))
+    moved[0, 0] = 0.5  # the inputs were copied: later changes do not leak in
+    expected = lower_bound_s(world.grid, starts, goals, 0.4, np.array([0.5]))
+    assert expected is not None and rec.lower_bound == expected
+    rec.defer_lower_bound(world.grid, starts, goals, 0.4, np.array([5.0]))
+    assert rec.lower_bound == expected  # the first bound found stays

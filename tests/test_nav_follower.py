@@ -89,3 +89,68 @@ def test_is_for_compares_the_goal():
     assert st.is_for(np.array([1.0, 2.0, 0.5]))
     assert not st.is_for(np.array([1.0, 2.0, 0.6]))
     assert not PathState().is_for(np.array([1.0, 2.0, 0.5]))
+
+
+def _targets_one_by_one(view, idx, states, params, lookahead_m):
+    """The follower's targets computed robot by robot with station/point_at (the reference
+    the fleet-wide arrays must match bit for bit)."""
+    from swarmpark.core.geometry import wrap_angle
+
+    targets = view.goals[idx].copy()
+    final = np.ones(len(idx), dtype=bool)
+    for k, i in enumerate(idx):
+        path = states[i].path
+        if path is None or len(path) < 2:
+            continue
+        cum, _, s_here = station(path, view.poses[i, :2])
+        if cum[-1] - s_here <= params.approach_m:
+            continue
+        final[k] = False
+        pt, m = point_at(path, cum, min(s_here + lookahead_m, cum[-1]))
+        seg = path[m + 1] - path[m]
+        heading = np.arctan2(seg[1], seg[0]) + (np.pi if states[i].reverse else 0.0)
+        targets[k] = [pt[0], pt[1], wrap_angle(heading)]
+    return targets, final
+
+
+def test_fleet_targets_match_the_per_robot_projection_exactly():
+    rng = np.random.default_rng(3)
+    n = 40
+    poses = np.column_stack([rng.uniform(0, 10, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    goals = np.column_stack([rng.uniform(0, 10, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    view = make_view(poses, goals)
+    params = FollowerParams()
+    fol = PathFollower(params)
+
+    def random_path(k):
+        if k == 0:
+            return None
+        return np.cumsum(rng.uniform(-2, 2, (k, 2)), axis=0) + rng.uniform(0, 10, 2)
+
+    states = [
+        PathState(path=random_path(int(rng.integers(0, 9))), reverse=bool(rng.integers(2)))
+        for _ in range(n)
+    ]
+    idx = np.flatnonzero(rng.random(n) < 0.8)
+    for round_ in range(3):  # replaced paths (longer ones too) refill their rows
+        for la in (params.lookahead_m, 3.0):
+            got = fol.targets(view, idx, states, la)
+            want = _targets_one_by_one(view, idx, states, params, la)
+            assert np.array_equal(got[1], want[1])
+            assert np.array_equal(got[0], want[0])  # bit for bit
+        assert (~want[1]).sum() > 5  # the lookahead branch was exercised
+        for i in rng.choice(n, 10, replace=False):
+            states[i].path = random_path(int(rng.integers(0, 6 + 10 * round_)))
+
+
+def test_waiting_is_false_only_for_a_plan_made_for_the_current_goal():
+    view = make_view([[1.0, 1.0, 0.0]] * 3, [[5.0, 5.0, 0.5]] * 3)
+    states = [
+        PathState(),
+        PathState(path_goal=np.array([5.0, 5.0, 0.5])),
+        PathState(path_goal=np.array([5.0, 5.1, 0.5])),
+    ]
+    fol = PathFollower(FollowerParams())
+    assert fol.waiting(view, np.arange(3), states).tolist() == [True, False, True]
+    states[2].path_goal = np.array([5.0, 5.0, 0.5])  # planned anew for the current goal
+    assert fol.waiting(view, np.arange(3), states).tolist() == [True, False, False]

@@ -78,10 +78,13 @@ class MetricsRecorder:
     min_clearance_robot: float = np.inf
     min_clearance_static: float = np.inf
     first_goal_s: float | None = None
-    lower_bound: float | None = None
 
     def __post_init__(self) -> None:
         n = len(self.ids)
+        # The lower bound is not needed to act: the inputs of each park command are kept and
+        # it is computed (once) when asked for, outside the control tick.
+        self._bound_inputs: list[tuple] = []
+        self._bound: float | None = None
         self.path_length = np.zeros(n)
         self._prev = np.asarray(self.start_poses, float).copy()
         self._commanded = np.zeros(n, dtype=bool)
@@ -95,6 +98,36 @@ class MetricsRecorder:
         # distance of the robot from it since (the detour it took).
         self._leg = np.repeat(self._prev[:, None, :2], 2, axis=1)
         self._lateral = np.zeros(n)
+
+    def defer_lower_bound(
+        self,
+        grid: OccupancyGrid,
+        starts: np.ndarray,
+        goals: np.ndarray,
+        inscribed_m: float,
+        max_speed_mps: np.ndarray,
+    ) -> None:
+        """Keep the inputs of :func:`lower_bound_s` for a park command (copies); the bound
+        is computed lazily by :attr:`lower_bound`, not inside the control tick."""
+        if self._bound is not None:
+            return
+        self._bound_inputs.append(
+            (
+                grid,
+                np.array(starts, float),
+                np.array(goals, float),
+                float(inscribed_m),
+                np.array(max_speed_mps, float),
+            )
+        )
+
+    @property
+    def lower_bound(self) -> float | None:
+        """:func:`lower_bound_s` of the first park command that has one (None if none has),
+        computed on first use."""
+        while self._bound is None and self._bound_inputs:
+            self._bound = lower_bound_s(*self._bound_inputs.pop(0))
+        return self._bound
 
     def on_goal(self, t: float, idx: np.ndarray, goals: np.ndarray | None = None) -> None:
         """Robots ``idx`` got a new goal at time ``t`` (``goals``: their poses, if known)."""
@@ -208,7 +241,7 @@ class MetricsRecorder:
         return {
             "success": bool(success),
             "time_to_park_s": time_to_park,
-            "lower_bound_s": None if self.lower_bound is None else round(self.lower_bound, 3),
+            "lower_bound_s": None if (bound := self.lower_bound) is None else round(bound, 3),
             "collisions": list(self.collisions),
             "min_clearance_m": None if not np.isfinite(clear) else round(float(clear), 4),
             "min_clearance_robot_m": None

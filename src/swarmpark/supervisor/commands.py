@@ -19,7 +19,7 @@ from shapely.ops import nearest_points, unary_union
 
 from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon
-from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors, lower_bound_s
+from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
 
@@ -53,8 +53,9 @@ class ParkPlan:
     """A park command worked out but not committed (:meth:`CommandsMixin.prepare_park`)."""
 
     group: ParkGroup
-    #: The run's lower bound on the time to park, if it has none yet.
-    lower_bound: float | None
+    #: The inputs of the run's lower bound on the time to park (computed lazily by the
+    #: metrics, outside the control tick: :meth:`MetricsRecorder.defer_lower_bound`).
+    bound_inputs: tuple
 
 
 @dataclass
@@ -192,16 +193,14 @@ class CommandsMixin:
             goal_dims=tuple((f.length_m, f.width_m) for f in fps),
             blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
         )
-        bound = None
-        if self.metrics.lower_bound is None:
-            bound = lower_bound_s(
-                self.world.grid,
-                self.truth_poses()[idx],
-                goals,
-                min(f.width_m for f in fps) / 2,
-                self.info.max_speed_mps[idx],
-            )
-        return ParkPlan(group, bound)
+        bound_inputs = (
+            self.world.grid,
+            self.truth_poses()[idx],
+            goals,
+            min(f.width_m for f in fps) / 2,
+            self.info.max_speed_mps[idx],
+        )
+        return ParkPlan(group, bound_inputs)
 
     def apply_park(self, plan: ParkPlan | str) -> Outcome:
         """Commit a plan of :meth:`prepare_park` (cheap; refused if it went stale)."""
@@ -217,8 +216,7 @@ class CommandsMixin:
         self.groups.append(group)
         goals = group.goals
         self._set_goals(idx, goals[group.goal_of])
-        if self.metrics.lower_bound is None and plan.lower_bound is not None:
-            self.metrics.lower_bound = plan.lower_bound
+        self.metrics.defer_lower_bound(*plan.bound_inputs)
         return self._accept(
             "park",
             robots=[self.ids[i] for i in idx],

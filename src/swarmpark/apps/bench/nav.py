@@ -132,3 +132,79 @@ def bench_tick(quick: bool) -> list[dict]:
         stats = time_call(sup.tick, repeat=20 if quick else 100, warmup=0)
         rows.append({"N": n, **stats, "meets_target": stats["median_ms"] < 20 if n == 50 else None})
     return rows
+
+
+def fleet_park_world(n: int):
+    """``n`` skids in columns of 10 on the left of a hall sized to fit them, parking into one
+    boundary on the right (the ``nav.tick`` layout, widened for big fleets)."""
+    from swarmpark.world.scenario import build_world, parse_scenario
+
+    robots = [
+        {"id": f"s{k}", "pose": [3.0 + 2.5 * (k // 10), 2.0 + 1.6 * (k % 10), 0.0]}
+        for k in range(n)
+    ]
+    x0 = 3.0 + 2.5 * ((n - 1) // 10) + 4.0
+    x1 = x0 + 1.6 * int(np.ceil(n / 8)) + 1.0
+    data = {
+        "name": f"fleet-{n}",
+        "duration_s": 600,
+        "map": {"size_m": [x1 + 3.0, 20], "resolution_m": 0.05},
+        "robots": robots,
+        "commands": [
+            {
+                "at_s": 0,
+                "park": {
+                    "robots": [r["id"] for r in robots],
+                    "boundary": [[x0, 2], [x1, 2], [x1, 18.5], [x0, 18.5]],
+                    "margin_m": 0.3,
+                },
+            }
+        ],
+    }
+    return build_world(parse_scenario(data))
+
+
+@register(
+    "nav.fleet",
+    "full ticks with a park command for the whole fleet, CPU time (time.process_time)",
+    target="steady tick <= 10 ms at 200 skids; first tick <= 200 ms at 100",
+)
+def bench_fleet(quick: bool) -> list[dict]:
+    import time
+
+    from swarmpark.control.nav.params import NavParams
+    from swarmpark.supervisor.core import Supervisor
+
+    per_tick = NavParams().planner.max_plans_per_tick
+    rows = []
+    for n in (10, 50) if quick else (10, 50, 100, 200):
+        sup = Supervisor(fleet_park_world(n))
+        t0 = time.process_time()
+        sup.tick()  # the park command: layout, assignment, the first plans
+        first = time.process_time() - t0
+        t0 = time.process_time()
+        planning = int(np.ceil(n / per_tick))  # until every skid has had its plan
+        for _ in range(planning):
+            sup.tick()
+        plan_tick = (time.process_time() - t0) / planning
+        for _ in range(20):
+            sup.tick()
+        ticks = []
+        for _ in range(20 if quick else 100):
+            t0 = time.process_time()
+            sup.tick()
+            ticks.append(time.process_time() - t0)
+        ms = np.asarray(ticks) * 1e3
+        rows.append(
+            {
+                "N": n,
+                "first_tick_ms": round(first * 1e3, 1),
+                "planning_tick_ms": round(plan_tick * 1e3, 1),
+                "steady_mean_ms": round(float(ms.mean()), 2),
+                "steady_p99_ms": round(float(np.percentile(ms, 99)), 2),
+                "meets_target": (
+                    bool(ms.mean() <= 10.0) if n == 200 else (first <= 0.2 if n == 100 else None)
+                ),
+            }
+        )
+    return rows

@@ -90,14 +90,17 @@ class Docking:
     ) -> np.ndarray:
         """Commands for robots ``idx``: the manoeuvre where it applies (``final``: in the final
         approach), else ``raw`` (or a back-up). Updates the robots' states."""
-        errors = goal_frame_errors(view.poses[idx], view.goals[idx])
+        # Per-skid scalars as Python floats, converted once for all (not per skid).
+        errors = np.column_stack(goal_frame_errors(view.poses[idx], view.goals[idx])).tolist()
+        changed = view.goal_changed[idx].tolist()
+        fin = np.asarray(final, dtype=bool).tolist()
         out = raw.copy()
-        for k, i in enumerate(idx):
+        for k, i in enumerate(idx.tolist()):
             st = docks[i]
-            if view.goal_changed[i]:
+            if changed[k]:
                 st.new_goal()
-            e = tuple(float(x[k]) for x in errors)
-            cmd = self._one(view, int(i), raw[k], bool(final[k]), e, st, stalls[i], backups[i])
+            e = tuple(errors[k])
+            cmd = self._one(view, i, raw[k], fin[k], e, st, stalls[i], backups[i])
             if cmd is not None:
                 out[k] = cmd
         return out

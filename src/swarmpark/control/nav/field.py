@@ -4,6 +4,8 @@ math is in :mod:`swarmpark.control.nav.apf`), turned into ``(v, omega)`` command
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -121,7 +123,7 @@ class PotentialField:
         dyn_owner = np.concatenate([skids.owner, np.full(len(view.people_xy), _PERSON)])
         if not self.dynamic:
             dyn, dyn_owner = dyn[:0], dyn_owner[:0]
-        reach = np.array([view.footprints[i].reach_m for i in idx]) + influence
+        reach = skids.reach[idx] + influence
         rob_l, pt_l, src_l = [], [], []
         sources = [(scene.static.kd, reach, 0)]
         if len(dyn):
@@ -134,7 +136,7 @@ class PotentialField:
             lens = np.fromiter((len(h) for h in hits), int, len(hits))
             if lens.sum():
                 rob_l.append(np.repeat(np.arange(n_act), lens))
-                pt_l.append(np.concatenate([np.asarray(h, int) for h in hits if len(h)]))
+                pt_l.append(np.fromiter(itertools.chain.from_iterable(hits), int, lens.sum()))
                 src_l.append(np.full(lens.sum(), src, int))
         if not rob_l:
             return None, None, None, None, dyn

@@ -92,15 +92,17 @@ class CollisionMonitor:
         plain = scene.skids.plain[idx]
         # A skid already inside its margin of something is judged by its plain footprint, or it
         # could never move away again.
-        body = np.where(self.within_margin(view, idx, body, scene)[:, None, None], plain, body)
+        others = footprint_corners(view.poses, scene.skids.plain)
+        inside = self.within_margin(view, idx, body, scene, others)
+        body = np.where(inside[:, None, None], plain, body)
         # Poses for every (robot, scale, time), from the current velocity towards the command.
         v_cmd = (raw[:, 0][:, None] * scales[None, :]).ravel()
         w_cmd = np.repeat(raw[:, 1], S)
         pose = rollout(view, np.repeat(idx, S), v_cmd, w_cmd, times).reshape(-1, 3)
         owner = np.repeat(np.arange(n_act), S * T)
         corners = footprint_corners(pose, np.repeat(body, S * T, axis=0))
-        bad = self._hits_static(view, corners, scene)
-        blockers = self._hits_skids(view, idx, corners, owner, bad, scene, robots)
+        bad = self._hits_static(view, corners, scene, group=S * T)
+        blockers = self._hits_skids(view, idx, corners, owner, bad, others, scene, robots)
         self._hits_people(view, corners, n_act, bad)
         bad = bad.reshape(n_act, S, T)
         # The fastest safe scale; if even turning in place collides, stop turning as well.
@@ -116,30 +118,53 @@ class CollisionMonitor:
         return MonitorResult(out, blockers, slowed)
 
     @staticmethod
-    def _hits_static(view: ControlView, corners: np.ndarray, scene: Scene) -> np.ndarray:
-        """Which footprints ``corners`` overlap a static solid."""
+    def _hits_static(
+        view: ControlView, corners: np.ndarray, scene: Scene, group: int = 1
+    ) -> np.ndarray:
+        """Which footprints ``corners`` overlap a static solid. The footprints come in runs of
+        ``group`` (one skid's rollout): the STR-tree is asked once per run, for the box around
+        it, and the pairs are then narrowed to the footprints whose own box meets the piece's."""
         bad = np.zeros(len(corners), dtype=bool)
         lo, hi = corners.min(axis=1), corners.max(axis=1)
-        qi, si = scene.static.tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
-        if len(qi):
+        glo = lo.reshape(-1, group, 2).min(axis=1)
+        ghi = hi.reshape(-1, group, 2).max(axis=1)
+        gi, si = scene.static.tree.query(shapely.box(glo[:, 0], glo[:, 1], ghi[:, 0], ghi[:, 1]))
+        if len(gi):
+            qi = (gi[:, None] * group + np.arange(group)).ravel()
+            si = np.repeat(si, group)
+            st = scene.static
+            meet = np.all((lo[qi] <= st.hi[si]) & (hi[qi] >= st.lo[si]), axis=1)
+            qi, si = qi[meet], si[meet]
             hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
             bad[qi[hit]] = True
         return bad
 
-    def _hits_skids(self, view, idx, corners, owner, bad, scene: Scene, robots: bool):
-        """Mark (in ``bad``) footprints overlapping other skids where they stand; returns per
-        robot row the skids hit at full speed."""
+    def _hits_skids(self, view, idx, corners, owner, bad, others, scene: Scene, robots: bool):
+        """Mark (in ``bad``) footprints overlapping other skids where they stand (``others``:
+        their corners); returns per robot row the skids hit at full speed."""
         S, T = len(self.scales), len(self.times)
-        others = footprint_corners(view.poses, scene.skids.plain)
-        tree = cKDTree(others.mean(axis=1))
-        radius = max(f.circumradius_m for f in view.footprints) * 2 + self.params.margin_m
-        cand = tree.query_ball_point(corners.mean(axis=1), radius)
-        lens = np.fromiter(map(len, cand), int, len(cand))
-        qa = np.repeat(np.arange(len(cand)), lens)
-        qb = np.fromiter(itertools.chain.from_iterable(cand), int, int(lens.sum()))
-        keep = (qb != idx[owner[qa]]) & robots
-        qa, qb = qa[keep], qb[keep]
         blockers: list[set[int]] = [set() for _ in range(len(idx))]
+        if not robots or not len(idx):
+            return blockers
+        centres = corners.mean(axis=1)
+        other_c = others.mean(axis=1)
+        radius = scene.skids.max_circumradius * 2 + self.params.margin_m
+        # One search per skid, around its first rollout pose and wide enough for its whole
+        # rollout; then the footprint-skid pairs closer than ``radius`` (as one search per
+        # footprint would find them).
+        hub = centres[:: S * T]
+        run = centres.reshape(len(idx), S * T, 2)
+        spread = np.linalg.norm(run - hub[:, None], axis=2).max(axis=1)
+        cand = cKDTree(other_c).query_ball_point(hub, radius + spread + 1e-6)
+        lens = np.fromiter(map(len, cand), int, len(cand))
+        rb = np.fromiter(itertools.chain.from_iterable(cand), int, int(lens.sum()))
+        ra = np.repeat(np.arange(len(idx)), lens)
+        keep = rb != idx[ra]
+        ra, rb = ra[keep], rb[keep]
+        qa = (ra[:, None] * (S * T) + np.arange(S * T)).ravel()
+        qb = np.repeat(rb, S * T)
+        near = np.linalg.norm(centres[qa] - other_c[qb], axis=1) <= radius
+        qa, qb = qa[near], qb[near]
         if len(qa):
             hit = convex_overlap(corners[qa], others[qb]) > TOUCH_TOLERANCE_M
             bad[qa[hit]] = True
@@ -159,18 +184,33 @@ class CollisionMonitor:
             bad |= gap < 0
 
     def within_margin(
-        self, view: ControlView, idx: np.ndarray, grown: np.ndarray, scene: Scene
+        self,
+        view: ControlView,
+        idx: np.ndarray,
+        grown: np.ndarray,
+        scene: Scene,
+        others: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Skids whose grown footprint overlaps a static solid or another skid right now."""
+        """Skids whose grown footprint overlaps a static solid or another skid right now
+        (``others``: all skids' plain corners where they stand, if known)."""
         corners = footprint_corners(view.poses[idx], grown)
         out = self._hits_static(view, corners, scene)
-        others = footprint_corners(view.poses, scene.skids.plain)
-        ia, ib = np.meshgrid(np.arange(len(idx)), np.arange(len(view.poses)), indexing="ij")
-        ia, ib = ia.ravel(), ib.ravel()
-        near = (
-            np.linalg.norm(view.poses[idx[ia], :2] - view.poses[ib, :2], axis=1)
-            < self.params.neighbour_range_m
-        )
+        if not len(idx):
+            return out
+        if others is None:
+            others = footprint_corners(view.poses, scene.skids.plain)
+        xy = view.poses[:, :2]
+        rng = self.params.neighbour_range_m
+        cand = cKDTree(xy).query_ball_point(xy[idx], rng)
+        lens = np.fromiter(map(len, cand), int, len(cand))
+        ib = np.fromiter(itertools.chain.from_iterable(cand), int, int(lens.sum()))
+        ia = np.repeat(np.arange(len(idx)), lens)
+        dist = np.linalg.norm(xy[idx[ia]] - xy[ib], axis=1)
+        # Only skids whose discs around the pivot (through the farthest corner) meet can
+        # overlap: the exact test is left for those.
+        r_a = np.linalg.norm(corners - xy[idx, None], axis=2).max(axis=1)
+        r_b = np.linalg.norm(others - xy[:, None], axis=2).max(axis=1)
+        near = (dist < rng) & (dist <= r_a[ia] + r_b[ib] + 1e-6)
         near &= idx[ia] != ib
         ia, ib = ia[near], ib[near]
         if len(ia):

@@ -123,7 +123,7 @@ class Navigator:
         self.planner.update(view, paths, self.follower)
         targets, final = self.follower.targets(view, idx, paths)
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
-        waiting = np.array([not paths[i].is_for(view.goals[i]) for i in idx])
+        waiting = self.follower.waiting(view, idx, paths)
         reverse = self.follower.update_ends(view, idx, final, paths)
         raw, dist_goal = self.field.drive(
             view, idx, scene, targets, reverse, final, p.follower.approach_m
@@ -151,9 +151,11 @@ class Navigator:
             raw = self.give_way.step(view, idx, raw, dist_goal, self._states("give_way"), docked)
             cmd[idx] = self._monitor(view, idx, raw)
         hold_outside(view, idx, cmd, p.hold)
-        for i in idx:  # how long the monitor or the field has kept a skid (nearly) still
-            r = self.robots[i]
-            r.stall.update(p.stall, cmd[i], r.dock.docked, view.dt)
+        # How long the monitor or the field has kept each skid (nearly) still.
+        robots = [self.robots[i] for i in idx]
+        StallWatch.update_all(
+            p.stall, [r.stall for r in robots], cmd[idx], [r.dock.docked for r in robots], view.dt
+        )
         return cmd
 
     def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:

@@ -52,13 +52,15 @@ class Planner:
     def update(self, view: ControlView, states: list[PathState], follower: PathFollower) -> None:
         """Plan for the active robots whose goal changed or whose failed plan is due."""
         p = self.params
-        wanted = []
-        for i in np.flatnonzero(view.active):
-            st = states[i]
-            stale = not st.is_for(view.goals[i])
-            due = view.t - st.planned_t >= p.replan_period_s
-            if stale or view.goal_changed[i] or (due and st.failed):
-                wanted.append(i)
+        active = np.flatnonzero(view.active)
+        # Stale plans (for another goal) found for the whole fleet at once; failed plans are
+        # few, so they are checked one by one.
+        redo = follower.waiting(view, active, states) | view.goal_changed[active]
+        wanted = [
+            i
+            for i, again in zip(active.tolist(), redo.tolist(), strict=True)
+            if again or (states[i].failed and view.t - states[i].planned_t >= p.replan_period_s)
+        ]
         # A bounded number of plans per tick (longest waiting first), so a park command for a
         # hundred skids does not stall the loop; the others wait for their path.
         wanted.sort(key=lambda i: (states[i].planned_t, i))

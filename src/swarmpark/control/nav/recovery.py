@@ -74,6 +74,14 @@ class StallWatch:
         still = abs(cmd[0]) < p.speed_mps and abs(cmd[1]) < p.yaw_rate_radps and not docked
         self.stalled_s = self.stalled_s + dt if still else 0.0
 
+    @staticmethod
+    def update_all(p: StallParams, watches: list, cmd: np.ndarray, docked: list, dt: float):
+        """:meth:`update` for many skids: ``watches``, their commands ``(n, 2)`` and whether
+        each is docked (the comparisons made for all at once)."""
+        slow = (np.abs(cmd[:, 0]) < p.speed_mps) & (np.abs(cmd[:, 1]) < p.yaw_rate_radps)
+        for w, s, d in zip(watches, slow.tolist(), docked, strict=True):
+            w.stalled_s = w.stalled_s + dt if s and not d else 0.0
+
 
 # ---------------------------------------------------------------------- back up
 

@@ -34,14 +34,16 @@ def sample_polygon(corners: np.ndarray, step_m: float) -> tuple[list[np.ndarray]
 
 @dataclass
 class StaticSolids:
-    """The known static solids ``(S, 4, 2)``: outline samples, a k-d tree of them and an
-    STR-tree of the pieces' boxes; the ORCA obstacles are made on first use."""
+    """The known static solids ``(S, 4, 2)``: outline samples, a k-d tree of them, the pieces'
+    boxes (``lo``, ``hi``) and an STR-tree of them; the ORCA obstacles are made on first use."""
 
     pieces: np.ndarray
     step_m: float
     points: np.ndarray = field(init=False)
     kd: cKDTree | None = field(init=False)
     tree: shapely.STRtree = field(init=False)
+    lo: np.ndarray = field(init=False)
+    hi: np.ndarray = field(init=False)
     _orca: list | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
@@ -51,7 +53,7 @@ class StaticSolids:
             pts += sample_polygon(piece, self.step_m)[0]
         self.points = np.vstack(pts) if pts else np.zeros((0, 2))
         self.kd = cKDTree(self.points) if len(self.points) else None
-        lo, hi = self.pieces.min(axis=1), self.pieces.max(axis=1)
+        self.lo, self.hi = lo, hi = self.pieces.min(axis=1), self.pieces.max(axis=1)
         self.tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
 
     def same(self, pieces: np.ndarray) -> bool:
@@ -77,7 +79,8 @@ class StaticSolids:
 @dataclass
 class SkidOutlines:
     """The skids' footprints: outline samples in the body frame with their owners, the plain
-    corners ``(N, 4, 2)`` and the corners grown by the monitor's margin."""
+    corners ``(N, 4, 2)``, the corners grown by the monitor's margin, and each footprint's
+    reach about its pivot ``(N,)`` and the largest circumradius (computed once per fleet)."""
 
     footprints: tuple[Footprint, ...]
     step_m: float
@@ -86,8 +89,12 @@ class SkidOutlines:
     owner: np.ndarray = field(init=False)
     plain: np.ndarray = field(init=False)
     grown: np.ndarray = field(init=False)
+    reach: np.ndarray = field(init=False)
+    max_circumradius: float = field(init=False)
 
     def __post_init__(self) -> None:
+        self.reach = np.array([f.reach_m for f in self.footprints])
+        self.max_circumradius = max(f.circumradius_m for f in self.footprints)
         pts, owner = [], []
         for j, fp in enumerate(self.footprints):
             edge_pts, counts = sample_polygon(fp.corners_body(), self.step_m)
