@@ -79,6 +79,27 @@ def test_person_waits_for_a_robot_in_its_way():
         contacts += sim.step(np.zeros((1, 2))).new_contacts
     p = sim.person_positions()[0]
     assert p[1] - 0.3 >= 3.4 - 1e-9  # stopped at the robot's left side (y = 3 + 0.4)
+    # The skid stood still: the person walked into it (reported, not the fleet's fault).
+    assert [(c.a, c.b, c.kind) for c in contacts] == [("a", "person0", "person-robot")]
+
+
+def test_a_skid_driving_into_a_standing_person_is_the_fleets_contact():
+    world = make_world(
+        robots=[{"id": "a", "pose": [2.0, 3.0, 0.0]}],
+        obstacles=[
+            {
+                "radius_m": 0.3,
+                "waypoints": [[4.0, 3.0], [4.0, 5.0]],
+                "speed_mps": 1.0,
+                "start_s": 100,
+            }
+        ],
+    )
+    sim = Simulator(world)
+    contacts = []
+    for _ in range(100):
+        contacts += sim.step(np.array([[0.5, 0.0]])).new_contacts
+    assert sim.poses[0, 0] + 0.6 <= 4.0 - 0.3 + 1e-9  # stopped at the person's rim
     assert [(c.a, c.b, c.kind) for c in contacts] == [("a", "person0", "robot-person")]
 
 

@@ -203,6 +203,10 @@ class MetricsRecorder:
     def parked(self) -> np.ndarray:
         return ~np.isnan(self._entered)
 
+    def fleet_collisions(self) -> list[dict]:
+        """Contacts the fleet caused: all but a person walking into a skid standing still."""
+        return [c for c in self.collisions if c.get("kind") != "person-robot"]
+
     def result(
         self, t_end: float, poses: np.ndarray, goals: np.ndarray, has_goal: np.ndarray
     ) -> dict:
@@ -210,7 +214,9 @@ class MetricsRecorder:
         cmd = self._commanded & has_goal
         parked = self.parked() & cmd
         all_parked = bool(np.all(parked[cmd])) and bool(cmd.any())
-        success = all_parked and not self.collisions
+        # A person walking into a skid that stands still is reported, not counted against
+        # the fleet (the simulator's kind "person-robot").
+        success = all_parked and not self.fleet_collisions()
         time_to_park = None
         if all_parked and self.first_goal_s is not None:
             time_to_park = round(float(np.nanmax(self._entered[cmd])) - self.first_goal_s, 3)

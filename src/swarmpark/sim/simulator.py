@@ -45,7 +45,9 @@ class Contact:
     t_s: float
     a: str
     b: str
-    kind: str  # robot-robot, robot-wall, robot-obstacle, robot-person
+    #: robot-robot, robot-wall, robot-obstacle, robot-person (the skid moved into the person)
+    #: or person-robot (a walking person met a skid standing still: not the fleet's fault).
+    kind: str
 
     def as_dict(self) -> dict:
         return {"t_s": round(self.t_s, 6), "a": self.a, "b": self.b, "kind": self.kind}
@@ -175,6 +177,7 @@ class Simulator:
             robot_ok &= ~revert_r
             person_ok &= ~revert_p
             focus_r, focus_p = revert_r, revert_p
+        contacts = self._blame_people(contacts, proposed)
         self.poses = np.where(robot_ok[:, None], proposed, self.poses)
         self.vel = np.where(robot_ok[:, None], vel, 0.0)
         self.person_s = np.where(person_ok, new_s, self.person_s)
@@ -190,6 +193,26 @@ class Simulator:
         ]
         self._active = keys | (self._active & near)
         return StepResult(new, ~robot_ok, clear_r, clear_s)
+
+    def _blame_people(self, contacts: set, proposed: np.ndarray) -> set:
+        """Who is at fault in a skid-person contact: the skid ("robot-person", the fleet's)
+        if its own move would have touched the person where the person stood before the step;
+        the person ("person-robot", reported, not counted against the fleet) if only the
+        person's walk closed the gap, e.g. into a skid standing still or driving away."""
+        if not any(k == "robot-person" for _, _, k in contacts):
+            return contacts
+        index = {rid: i for i, rid in enumerate(self.ids)}
+        pidx = {p.id: k for k, p in enumerate(self.people)}
+        before = self.person_positions()
+        out = set()
+        for a, b, k in contacts:
+            if k == "robot-person":
+                i, j = index[a], pidx[b]
+                corners = self.corners(proposed[i : i + 1])
+                gap = rect_disc_gap(corners, before[j : j + 1], self.person_radius[j : j + 1])
+                k = "robot-person" if gap[0] < -TOUCH_TOLERANCE_M else "person-robot"
+            out.add((a, b, k))
+        return out
 
     def _people_progress(self, dt: float) -> np.ndarray:
         if not self.people:
