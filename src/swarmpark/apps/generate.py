@@ -247,7 +247,10 @@ def _l_bay(ctx: _Ctx) -> _Site:
     from shapely.geometry import Point, Polygon, box
 
     x0, y0, x1, y1 = bx, by, bx + bw, by + bh
-    cw, ch = fx * bw, fy * bh
+    # Each arm of the L stays wide enough for a skid in any heading, with its margins (a small
+    # fleet's box is small: a cut of half of it left arms no skid fits in).
+    arm = max(max(fp) for fp in ctx.fps) + 2 * ctx.margin + 0.2
+    cw, ch = min(fx * bw, max(bw - arm, 0.0)), min(fy * bh, max(bh - arm, 0.0))
     cx = x0 if rng.random() < 0.5 else x1 - cw  # which corner the L misses
     cy = y0 if rng.random() < 0.5 else y1 - ch
     shape = box(x0, y0, x1, y1).difference(box(cx, cy, cx + cw, cy + ch))

@@ -332,10 +332,15 @@ def _client(scheduler: str | None, workers: int | None):
     if scheduler:
         return Client(scheduler), None
     n = workers or os.cpu_count() or 1
-    # In-process workers talk over inproc://; the dashboard listens on loopback, any free
-    # port (a second sweep on the same machine must not collide on 8787).
+    # In-process workers talk over inproc://; the scheduler's and the workers' dashboards
+    # listen on loopback only (the workers' default is every interface), any free port (a
+    # second sweep on the same machine must not collide on 8787).
     cluster = LocalCluster(
-        processes=False, n_workers=n, threads_per_worker=1, dashboard_address="127.0.0.1:0"
+        processes=False,
+        n_workers=n,
+        threads_per_worker=1,
+        dashboard_address="127.0.0.1:0",
+        worker_dashboard_address="127.0.0.1:0",
     )
     return Client(cluster), cluster
 
