@@ -145,26 +145,33 @@ class OccupancyGrid:
 
         corners = np.asarray(corners, float)
         mask = self.occupied if mask is None else mask
-        res, (ox, oy) = self.resolution_m, self.origin
-        h, w = self.shape
         lo, hi = corners.min(axis=1), corners.max(axis=1)
-        c0 = np.floor((lo[:, 0] - ox) / res).astype(int)
-        r0 = np.floor((lo[:, 1] - oy) / res).astype(int)
-        c1 = np.ceil((hi[:, 0] - ox) / res).astype(int)
-        r1 = np.ceil((hi[:, 1] - oy) / res).astype(int)
+        r0, c0, r1, c1 = self.cell_windows(corners)
         tol = TOUCH_TOLERANCE_M
         xmin, ymin, xmax, ymax = self.bounds
         out = (lo[:, 0] < xmin - tol) | (lo[:, 1] < ymin - tol)
         out |= (hi[:, 0] > xmax + tol) | (hi[:, 1] > ymax + tol)
         for i in np.flatnonzero(~out):
-            window = mask[max(r0[i], 0) : min(r1[i], h), max(c0[i], 0) : min(c1[i], w)]
+            window = mask[r0[i] : r1[i], c0[i] : c1[i]]
             if not window.any():
                 continue
-            rc = np.argwhere(window) + [max(r0[i], 0), max(c0[i], 0)]
+            rc = np.argwhere(window) + [r0[i], c0[i]]
             squares = self.cell_squares(rc)
             depth = convex_overlap(np.repeat(corners[i : i + 1], len(squares), axis=0), squares)
             out[i] = bool(np.any(depth > tol))
         return out
+
+    def cell_windows(self, corners: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Cell ranges ``(r0, c0, r1, c1)`` (each ``(N,)``, end exclusive, clipped to the grid)
+        covering the bounding boxes of the polygons ``corners`` ``(N, K, 2)``."""
+        res, (ox, oy) = self.resolution_m, self.origin
+        h, w = self.shape
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        c0 = np.clip(np.floor((lo[:, 0] - ox) / res).astype(int), 0, w)
+        r0 = np.clip(np.floor((lo[:, 1] - oy) / res).astype(int), 0, h)
+        c1 = np.clip(np.ceil((hi[:, 0] - ox) / res).astype(int), 0, w)
+        r1 = np.clip(np.ceil((hi[:, 1] - oy) / res).astype(int), 0, h)
+        return r0, c0, r1, c1
 
     def cell_squares(self, rc: np.ndarray) -> np.ndarray:
         """Counter-clockwise corner squares ``(N, 4, 2)`` of cells ``(N, 2)``."""

@@ -25,7 +25,6 @@ from fastapi import (
     Query,
     Request,
     WebSocket,
-    WebSocketDisconnect,
 )
 from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
@@ -318,6 +317,7 @@ async def recording(request: Request):
 async def stream(ws: WebSocket):
     """Frames in the live format: one at once, then while playing or after a seek."""
     from swarmpark.server.engine import Client
+    from swarmpark.server.viewers import pump
 
     player: Player = ws.app.state.player
     await ws.accept()
@@ -330,21 +330,7 @@ async def stream(ws: WebSocket):
         while True:
             await ws.send_text(await client.queue.get())
 
-    async def receiver():
-        with contextlib.suppress(WebSocketDisconnect):
-            while True:
-                await ws.receive_text()
-
-    tasks = [asyncio.ensure_future(sender()), asyncio.ensure_future(receiver())]
-    try:
-        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        player.clients.discard(client)
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError):
-                await t
+    await pump(ws, client, player.clients, sender)
 
 
 def create_replay_app(rec: Recording, *, open_url: str | None = None) -> FastAPI:

@@ -4,6 +4,7 @@ dropped, never waited for) and the server-load report of ``GET /api/perf``."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import time
 from dataclasses import dataclass, field
@@ -14,7 +15,7 @@ import numpy as np
 if TYPE_CHECKING:
     from swarmpark.server.engine import Session
 
-__all__ = ["Client", "perf_report", "CLIENT_QUEUE", "MAX_OVERFLOWS", "SENDS_PER_FRAME"]
+__all__ = ["Client", "pump", "perf_report", "CLIENT_QUEUE", "MAX_OVERFLOWS", "SENDS_PER_FRAME"]
 
 #: Frames a slow client may have queued before older ones are dropped.
 CLIENT_QUEUE = 4
@@ -92,3 +93,26 @@ def perf_report(self: Session, frames: int | None = None) -> dict:
         "ticks_total": self._ticks,
         "monotonic_s": round(time.monotonic(), 4),
     }
+
+
+async def pump(ws, client: Client, clients: set, sender) -> None:
+    """Serve one viewer's WebSocket: run ``sender()`` (which pushes its frames) beside a
+    receiver that only notices the close; when either ends, drop ``client`` from ``clients``
+    and stop both. Shared by the live server and replay."""
+    from starlette.websockets import WebSocketDisconnect
+
+    async def receiver() -> None:
+        with contextlib.suppress(WebSocketDisconnect):
+            while True:
+                await ws.receive_text()  # nothing is expected; this notices the close
+
+    tasks = [asyncio.ensure_future(sender()), asyncio.ensure_future(receiver())]
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        clients.discard(client)
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError):
+                await t

@@ -296,14 +296,7 @@ class Simulator:
 
     def _boxes_hold_interior(self, corners: np.ndarray) -> np.ndarray:
         """Bool ``(N,)``: the footprints' bounding boxes hold an interior block cell."""
-        grid = self.world.grid
-        h, w = grid.shape
-        res, (ox, oy) = grid.resolution_m, grid.origin
-        lo, hi = corners.min(axis=1), corners.max(axis=1)
-        c0 = np.clip(np.floor((lo[:, 0] - ox) / res).astype(int), 0, w)
-        r0 = np.clip(np.floor((lo[:, 1] - oy) / res).astype(int), 0, h)
-        c1 = np.clip(np.ceil((hi[:, 0] - ox) / res).astype(int), 0, w)
-        r1 = np.clip(np.ceil((hi[:, 1] - oy) / res).astype(int), 0, h)
+        r0, c0, r1, c1 = self.world.grid.cell_windows(corners)
         sat = self._interior_sat
         return (sat[r1, c1] - sat[r0, c1] - sat[r1, c0] + sat[r0, c0]) > 0
 

@@ -4,17 +4,17 @@ and the WebSocket that streams frames."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 from typing import Annotated
 
-from fastapi import APIRouter, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Query, Request, WebSocket
 from fastapi.responses import Response
 
 from swarmpark.core.limits import MAX_VIEWERS
 from swarmpark.server.deps import SessionDep, has_control, has_secret
 from swarmpark.server.engine import Client, Session
 from swarmpark.server.schemas import AuthStatus
+from swarmpark.server.viewers import pump
 
 __all__ = ["router"]
 
@@ -102,18 +102,4 @@ async def stream(ws: WebSocket):
             await ws.send_text(msg)
             client.overflows = 0  # it keeps up
 
-    async def receiver() -> None:
-        with contextlib.suppress(WebSocketDisconnect):
-            while True:
-                await ws.receive_text()  # nothing is expected; this notices the close
-
-    tasks = [asyncio.ensure_future(sender()), asyncio.ensure_future(receiver())]
-    try:
-        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        session.clients.discard(client)
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError):
-                await t
+    await pump(ws, client, session.clients, sender)
