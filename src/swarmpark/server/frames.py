@@ -1,8 +1,11 @@
 """Compact state messages for the browser: the static world once, then small per-frame deltas.
 
-A *frame* carries what changes every tick (poses, states, people, the clock) as rounded
-arrays, plus the slow parts (goals, planned paths, park-group boundaries, the command log,
-the metrics summary) only when they changed since the previous frame. A client that joins,
+A *frame* carries what changes every tick (poses, states, people and the people the fleet
+tracks, the clock) as rounded arrays, plus the slow parts (goals, planned paths, park-group
+boundaries, the command log, the metrics summary, each skid's last order) only when they
+changed since the previous frame. The heavy layers (obstacles detected by onboard sensing,
+each skid's last velocity command and localization error) are looked at twice a second
+(:data:`HEAVY_EVERY`) and sent only when they changed. A client that joins,
 or that missed a frame, gets a *full* frame with every slow part. Angles are degrees here:
 this is the user's edge.
 """
@@ -16,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from swarmpark.supervisor.core import ROBOT_STATES, Supervisor
+from swarmpark.supervisor.sensing import DETECTION_SQUARE_M
 
 __all__ = ["FrameEncoder", "world_info", "map_png", "jsonable", "SLOW_KEYS"]
 
@@ -25,7 +29,11 @@ XY_DEC, LINE_DEC, DEG_DEC, V_DEC = 3, 2, 1, 2
 LOG_LENGTH = 40
 #: The metrics summary is recomputed every this many frames (it walks every robot).
 METRICS_EVERY = 10
-SLOW_KEYS = ("goals", "paths", "groups", "log", "metrics")
+#: The heavy layers are looked at every this many frames (2 Hz at 20 frames a second).
+HEAVY_EVERY = 10
+#: Detected-obstacle squares sent at most (the first ones in order; ``total`` says how many).
+MAX_DETECTED = 5_000
+SLOW_KEYS = ("goals", "paths", "groups", "log", "metrics", "orders", "detected", "robot_info")
 #: Robot ids listed per log entry (the count is always given).
 LOG_ROBOTS = 8
 _STATE_CODE = {s: k for k, s in enumerate(ROBOT_STATES)}
@@ -90,6 +98,10 @@ def world_info(sup: Supervisor) -> dict:
         "walls": [_ring(p) for p in world.wall_polygons],
         "obstacles": [_ring(p) for p in world.static_obstacles],
         "people": [{"id": p.id, "radius_m": p.radius_m} for p in world.people],
+        # Onboard sensing: skids localize themselves (a localization error per skid) and
+        # detect obstacles (drawn as squares of this side).
+        "sensing": sup.sensing is not None,
+        "detection_square_m": DETECTION_SQUARE_M if sup.sensing is not None else None,
     }
 
 
@@ -117,8 +129,11 @@ class FrameEncoder:
         self._goals_key: bytes | None = None
         self._groups_key: tuple | None = None
         self._log_n = -1
+        self._orders_n = 0
+        self._orders: list[list | None] = [None] * sup.n
         self._frames = 0
         self.metrics_now = True
+        self._cache_ref: dict[str, Any] = {}
 
     # ------------------------------------------------------------------ slow parts
 
@@ -208,6 +223,66 @@ class FrameEncoder:
             )
         return list(shown)
 
+    def _orders_now(self) -> list | None:
+        """Per skid, the last command applied to it: ``[command, t_s]`` or ``None``."""
+        outcomes, sup = self.sup.outcomes, self.sup
+        if len(outcomes) == self._orders_n:
+            return None
+        changed = False
+        for o in outcomes[self._orders_n :]:
+            if not o.accepted:
+                continue
+            if o.command == "estop":
+                names = sup.ids
+            elif o.detail and isinstance(o.detail.get("robots"), list):
+                names = o.detail["robots"]
+            elif o.detail and o.detail.get("robot") in sup.index:
+                names = [o.detail["robot"]]
+            else:
+                continue  # a teleop keep-alive names no one new
+            entry = [o.command, round(o.t_s, 2)]
+            for name in names:
+                i = sup.index.get(name)
+                if i is not None and self._orders[i] != entry:
+                    self._orders[i] = entry
+                    changed = True
+        self._orders_n = len(outcomes)
+        return list(self._orders) if changed or "orders" not in self._cache else None
+
+    def _detected(self) -> dict | None:
+        """Obstacles the skids' scans detected (onboard sensing), as the squares holding
+        them: ``{"squares": [i0, j0, i1, j1, ...], "total": K}`` (square ``(i, j)`` spans
+        ``[i, i + 1) * detection_square_m`` of ``/api/world`` in x, likewise in y)."""
+        sensing = self.sup.sensing
+        if sensing is None:
+            return None
+        sq = sensing.detected_squares
+        if sq is self._cache_ref.get("detected"):
+            return None  # replaced, never changed in place, when the detections change
+        self._cache_ref["detected"] = sq
+        out = {"squares": sq[:MAX_DETECTED].ravel().tolist(), "total": len(sq)}
+        return None if out == self._cache.get("detected") else out
+
+    def _robot_info(self) -> dict | None:
+        """Per skid: the last velocity command sent ``cmd`` ``[[v, omega], ...]`` and, when
+        the skids localize onboard in the simulator, the localization error ``loc_err_m``
+        (estimate against the truth, at the last scan)."""
+        sup = self.sup
+        # + 0.0: no "-0.0" for a command rounded to zero
+        out: dict[str, Any] = {"cmd": (np.round(sup.sent, V_DEC) + 0.0).tolist()}
+        if sup.sensing is not None and sup.loc_errors:
+            out["loc_err_m"] = np.round(sup.loc_errors[-1], XY_DEC).tolist()
+        return None if out == self._cache.get("robot_info") else out
+
+    def _tracked(self) -> list | None:
+        """The people the fleet avoids as its tracker reports them, ``[[x, y, vx, vy], ...]``
+        (``None`` with onboard sensing: the skids then see people only as detections)."""
+        people = self.sup.inbox.people
+        if self.sup.sensing is not None or people is None or not len(people.xy):
+            return None
+        rows = np.column_stack([np.round(people.xy, LINE_DEC), np.round(people.vel, V_DEC)])
+        return rows.tolist()
+
     def _metrics(self) -> dict:
         sup = self.sup
         r = sup.metrics.result(sup.t, sup.truth_poses(), sup.goals, sup.has_goal)
@@ -255,8 +330,15 @@ class FrameEncoder:
             "people": people,
             **extra,
         }
+        tracked = self._tracked()
+        if tracked is not None:
+            fast["tracked"] = tracked
+        parts = [("goals", self._goals), ("paths", self._paths), ("groups", self._groups)]
+        parts.append(("orders", self._orders_now))
+        if self._frames % HEAVY_EVERY == 0:
+            parts += [("detected", self._detected), ("robot_info", self._robot_info)]
         changed: dict[str, Any] = {}
-        for key, fn in (("goals", self._goals), ("paths", self._paths), ("groups", self._groups)):
+        for key, fn in parts:
             val = fn()
             if val is not None:
                 changed[key] = val

@@ -171,6 +171,11 @@ class Supervisor(CommandsMixin):
         """The map the skids plan in: the map, plus static obstacles or detections."""
         return self.sensing.known_grid if self.sensing is not None else self._known_grid
 
+    @property
+    def sent(self) -> np.ndarray:
+        """``(N, 2)``: the ``(v, omega)`` last commanded to each robot (zero when none was)."""
+        return self._sent
+
     def truth_poses(self) -> np.ndarray:
         """Where the skids really are (the simulator's truth; without one, what they report).
         For metrics and reports only."""

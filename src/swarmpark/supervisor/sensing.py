@@ -92,6 +92,13 @@ class OnboardSensing:
         self._detected_squares = np.zeros((0, 2), dtype=np.int64)
         self.static_view = self._wall_pieces  # walls and detected squares, for the view
 
+    @property
+    def detected_squares(self) -> np.ndarray:
+        """``(K, 2)`` integer indices of the :data:`DETECTION_SQUARE_M` squares holding
+        detected obstacle cells (square ``(i, j)`` spans ``[i, i + 1) * DETECTION_SQUARE_M``
+        in x, likewise in y), sorted."""
+        return self._detected_squares
+
     def update(
         self, t: float, inbox: Inbox, has_goal: np.ndarray, paths, half_widths: np.ndarray
     ) -> np.ndarray:

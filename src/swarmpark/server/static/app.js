@@ -8,6 +8,10 @@ const STATE_COLOURS = {
   estopped: "#e0242c", teleop: "#a66bff", stuck: "#ff4fd8", lost: "#7d2b2b",
 };
 const PATH_COLOUR = "#4cd964";
+const DETECTED_COLOUR = "#d040ff";
+const TRACKED_COLOUR = "#ffd23c";
+// Parts of a frame sent only when they change (the server's frames.SLOW_KEYS).
+const SLOW_KEYS = ["goals", "paths", "groups", "log", "metrics", "orders", "detected", "robot_info"];
 const GAMEPAD_DEADZONE = 0.15;
 
 // ------------------------------------------------------------------ state
@@ -233,6 +237,9 @@ function draw() {
   const f = S.frame;
   if (!f) return;
 
+  S.drawn = { detected: 0, people: 0, tracked: 0 };
+  drawDetected(f);
+
   // Parking boundaries of active park groups.
   for (const g of f.groups || []) {
     pathPolygon(g.boundary, true);
@@ -276,16 +283,39 @@ function draw() {
     ctx.strokeText(label, spot[0], spot[1]); ctx.fillStyle = "#fff"; ctx.fillText(label, spot[0], spot[1]);
   });
 
-  // People (moving obstacles).
+  // People (moving obstacles), then the people the fleet tracks with their velocity (the
+  // arrow is where the person will be in one second).
   (f.people || []).forEach(([x, y], k) => {
     const rad_m = S.world.people[k] ? S.world.people[k].radius_m : 0.3;
     const [sx, sy] = toScreen(x, y);
     ctx.beginPath(); ctx.arc(sx, sy, rad_m * S.view.scale, 0, 2 * Math.PI);
     ctx.fillStyle = "rgba(255,90,60,0.6)"; ctx.fill(); ctx.strokeStyle = "#ff5a3c"; ctx.lineWidth = 2; ctx.stroke();
+    S.drawn.people++;
+  });
+  (f.tracked || []).forEach(([x, y, vx, vy]) => {
+    const [sx, sy] = toScreen(x, y);
+    ctx.beginPath(); ctx.arc(sx, sy, Math.max(3, 0.12 * S.view.scale), 0, 2 * Math.PI);
+    ctx.strokeStyle = TRACKED_COLOUR; ctx.lineWidth = 2; ctx.stroke();
+    const speed = Math.hypot(vx, vy);
+    if (speed > 0.02) drawArrow(x, y, deg(Math.atan2(vy, vx)), Math.max(10, speed * S.view.scale), TRACKED_COLOUR, 2);
+    S.drawn.tracked++;
   });
 
   drawOperatorLayer();
   drawScaleAndLegend(w, h);
+}
+
+function drawDetected(f) {
+  // Obstacles the skids' scans detected (onboard sensing): the squares holding them.
+  const d = f.detected, side = S.world.detection_square_m;
+  if (!d || !side || !d.squares.length) return;
+  const px = Math.max(1, side * S.view.scale);
+  ctx.fillStyle = "rgba(208,64,255,0.75)";
+  for (let k = 0; k + 1 < d.squares.length; k += 2) {
+    const [sx, sy] = toScreen(d.squares[k] * side, (d.squares[k + 1] + 1) * side);
+    ctx.fillRect(sx, sy, px, px);
+  }
+  S.drawn.detected = d.squares.length / 2;
 }
 
 function drawScaleAndLegend(w, h) {
@@ -301,6 +331,8 @@ function drawScaleAndLegend(w, h) {
   ctx.fillText(`${len >= 1 ? len : len.toFixed(2)} m`, x0 + px / 2, y0 - 2);
   // Legend: the state colours, then people and obstacles.
   const items = [...Object.entries(STATE_COLOURS), ["person", "#ff5a3c"], ["obstacle", "#f0a020"], ["preview", "#ff78ff"]];
+  if (S.world.sensing) items.push(["detected", DETECTED_COLOUR]);
+  if (S.frame && S.frame.tracked) items.push(["tracked, v", TRACKED_COLOUR]);
   ctx.font = "11px system-ui, sans-serif"; ctx.textAlign = "left"; ctx.textBaseline = "middle";
   const lw = 84, lx = w - lw - 8;
   let ly = 10;
@@ -464,6 +496,8 @@ function updatePanels() {
     tr.cells[3].textContent = g ? `${g[0].toFixed(1)}, ${g[1].toFixed(1)}, ${g[2].toFixed(0)}°` : "-";
   });
 
+  updateRobotPanel();
+
   if (f.metrics) {
     const m = f.metrics;
     const fmt = (v, d = 2) => (v === null || v === undefined ? "-" : typeof v === "number" ? v.toFixed(d) : String(v));
@@ -491,6 +525,26 @@ function updatePanels() {
   }
 }
 
+// The per-skid panel: the one selected skid (a click on it) in detail.
+function updateRobotPanel() {
+  const f = S.frame, sel = [...S.selection];
+  const i = sel.length === 1 ? ids().indexOf(sel[0]) : -1;
+  $("robot-box").classList.toggle("hidden", i < 0 || !f);
+  if (i < 0 || !f) return;
+  const r = f.robots[i], info = f.robot_info || {}, g = f.goals && f.goals[i];
+  const order = f.orders && f.orders[i], cmd = info.cmd && info.cmd[i];
+  const err = info.loc_err_m ? info.loc_err_m[i] : null;
+  const set = (id, text) => { $(id).textContent = text; };
+  set("rp-id", sel[0]);
+  set("rp-state", stateName(r[3]));
+  set("rp-speed", r[4].toFixed(2) + " m/s");
+  set("rp-goal", g ? `${g[0].toFixed(2)}, ${g[1].toFixed(2)}, ${g[2].toFixed(0)}°` : "none");
+  set("rp-loc", S.world.sensing ? (err === null || err === undefined ? "-" : (100 * err).toFixed(1) + " cm")
+    : "not localizing onboard");
+  set("rp-cmd", cmd ? `v ${cmd[0].toFixed(2)} m/s, ω ${cmd[1].toFixed(2)} rad/s` : "-");
+  set("rp-order", order ? `${order[0]} at ${order[1].toFixed(1)} s` : "none");
+}
+
 function updateSelectionPanel() {
   const sel = [...S.selection];
   $("sel-count").textContent = sel.length ? `(${sel.length})` : "(none)";
@@ -501,6 +555,7 @@ function updateSelectionPanel() {
   $("btn-teleop").disabled = !can || sel.length !== 1 || S.teleop.robot === sel[0];
   $("btn-release").disabled = !can || !S.teleop.robot;
   updateParkPanel();
+  updateRobotPanel();
   S.dirty = true;
 }
 
@@ -990,7 +1045,7 @@ async function onFrame(msg) {
   // Slow parts are sent only when they change: keep the last ones.
   const prev = msg.full || !S.frame || S.frame.rev !== msg.rev ? {} : S.frame;
   const f = { ...msg };
-  for (const k of ["goals", "paths", "groups", "log", "metrics"]) if (!(k in msg) && k in prev) f[k] = prev[k];
+  for (const k of SLOW_KEYS) if (!(k in msg) && k in prev) f[k] = prev[k];
   S.frame = f;
   S.lastFrameAt = performance.now();
   S.frames.push({ t_s: f.t_s, estop: f.estop, robots: f.robots });
