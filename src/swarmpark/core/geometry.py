@@ -252,11 +252,13 @@ def rect_disc_gap(corners: np.ndarray, centers: np.ndarray, radii: np.ndarray) -
     return np.where(outside > 0, outside - radii, -inside - radii)
 
 
-def as_simple_polygon(points, field: str) -> Polygon:
+def as_simple_polygon(points, field: str, *, max_vertices: int | None = None) -> Polygon:
     """A shapely polygon from vertices, or a :class:`GeometryError` naming ``field``.
 
-    The polygon must have at least three distinct vertices, non-zero area and no
-    self-intersection. Orientation is normalized to counter-clockwise.
+    The polygon must have at least three distinct vertices, non-zero area, no
+    self-intersection and at most ``max_vertices`` vertices (default
+    :data:`~swarmpark.core.limits.MAX_POLYGON_VERTICES`). Orientation is normalized to
+    counter-clockwise.
     """
     try:
         pts = np.asarray(points, dtype=float)
@@ -271,7 +273,7 @@ def as_simple_polygon(points, field: str) -> Polygon:
             f"{field}: coordinates must lie within +-{MAX_COORDINATE_M:g} m "
             f"(got {float(np.abs(pts).max()):g})"
         )
-    check_vertices(len(pts), field, error=GeometryError)
+    check_vertices(len(pts), field, error=GeometryError, limit=max_vertices)
     poly = Polygon(pts)
     if not poly.is_valid or poly.area <= 0:
         reason = shapely.is_valid_reason(poly)

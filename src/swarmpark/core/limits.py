@@ -40,6 +40,8 @@ __all__ = [
     "MIN_DT_S",
     "MAX_TICKS",
     "MAX_BODY_BYTES",
+    "MAX_PARK_BODY_BYTES",
+    "MAX_BOUNDARY_VERTICES",
     "MAX_VIEWERS",
     "MAX_ROBOTS",
 ]
@@ -50,6 +52,11 @@ MAX_GRID_CELLS = 16_000_000
 #: A boundary, wall or obstacle polygon may have at most this many vertices (an operator
 #: draws tens; a CAD export of a hangar has hundreds).
 MAX_POLYGON_VERTICES = 2_000
+#: A park boundary may have this many (a surveyed deck outline, densely sampled). The
+#: layout of one that large runs for seconds in the server's work pool (about 2 s with a
+#: fixed heading, 30 s with ``heading_deg: auto`` on the development machine), never on the
+#: path of the e-stop.
+MAX_BOUNDARY_VERTICES = 20_000
 #: Coordinates beyond this (10 km) are not a site on a ship or in a hangar.
 MAX_COORDINATE_M = 10_000.0
 #: Cells finer than a millimetre are a typo, not a map.
@@ -73,6 +80,10 @@ MAX_ROBOTS = 1_000
 #: Largest request body the server reads (HTTP 413 beyond): a park boundary of the largest
 #: allowed polygon is a few tens of kB.
 MAX_BODY_BYTES = 256 * 1024
+#: Largest body of a park or park-preview request: a boundary of
+#: :data:`MAX_BOUNDARY_VERTICES` vertices written at full float precision (about 42 bytes
+#: a vertex) fits.
+MAX_PARK_BODY_BYTES = 1024 * 1024
 #: WebSocket viewers of one server at once (more are refused with close code 1013).
 MAX_VIEWERS = 256
 
@@ -139,10 +150,14 @@ def check_grid_cells(
         )
 
 
-def check_vertices(n: int, field: str, *, error: type[ValueError] = ValueError) -> None:
-    """Refuse a polygon with more than :data:`MAX_POLYGON_VERTICES` vertices."""
-    if n > MAX_POLYGON_VERTICES:
-        raise error(f"{field} has {n} vertices, more than the limit of {MAX_POLYGON_VERTICES}")
+def check_vertices(
+    n: int, field: str, *, error: type[ValueError] = ValueError, limit: int | None = None
+) -> None:
+    """Refuse a polygon with more than ``limit`` (default :data:`MAX_POLYGON_VERTICES`)
+    vertices."""
+    limit = MAX_POLYGON_VERTICES if limit is None else limit
+    if n > limit:
+        raise error(f"{field} has {n} vertices, more than the limit of {limit}")
 
 
 def check_inside(

@@ -18,6 +18,7 @@ from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
 from swarmpark.core.geometry import Footprint, as_simple_polygon, center_to_pivot, rotation
+from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 
 __all__ = [
     "LayoutError",
@@ -169,14 +170,18 @@ def _as_boundary(boundary) -> tuple[Polygon, list[Polygon]]:
     if isinstance(boundary, Polygon):
         if boundary.is_empty:
             raise LayoutError("park.boundary: the polygon is empty")
-        shell = as_simple_polygon(np.asarray(boundary.exterior.coords)[:-1], "park.boundary")
+        shell = as_simple_polygon(
+            np.asarray(boundary.exterior.coords)[:-1],
+            "park.boundary",
+            max_vertices=MAX_BOUNDARY_VERTICES,
+        )
         holes = [Polygon(h) for h in boundary.interiors]
         return shell, holes
     if isinstance(boundary, BaseGeometry):
         raise LayoutError(
             f"park.boundary: expected a Polygon or a list of [x, y] (got {boundary.geom_type})"
         )
-    return as_simple_polygon(boundary, "park.boundary"), []
+    return as_simple_polygon(boundary, "park.boundary", max_vertices=MAX_BOUNDARY_VERTICES), []
 
 
 def _as_obstacles(obstacles) -> BaseGeometry:

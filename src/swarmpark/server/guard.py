@@ -11,7 +11,9 @@ WebSocket alike (an ASGI middleware in front of every route).
   not a browser acting for another site.
 * **Body size**: a body over :data:`~swarmpark.core.limits.MAX_BODY_BYTES` is refused with
   413 as soon as its ``Content-Length`` (or the bytes read so far) says so, before it is
-  parsed.
+  parsed. The park and park-preview requests may be larger, up to
+  :data:`~swarmpark.core.limits.MAX_PARK_BODY_BYTES` (a boundary of up to
+  :data:`~swarmpark.core.limits.MAX_BOUNDARY_VERTICES` vertices).
 """
 
 from __future__ import annotations
@@ -21,13 +23,15 @@ import json
 from collections.abc import Iterable
 from urllib.parse import urlsplit
 
-from swarmpark.core.limits import MAX_BODY_BYTES
+from swarmpark.core.limits import MAX_BODY_BYTES, MAX_PARK_BODY_BYTES
 
-__all__ = ["GuardMiddleware", "DEFAULT_HOSTS", "host_allowed", "origin_allowed"]
+__all__ = ["GuardMiddleware", "DEFAULT_HOSTS", "BODY_LIMITS", "host_allowed", "origin_allowed"]
 
 #: Names always accepted in ``Host`` (``testserver``: Starlette's test client; a single-label
 #: name no public DNS resolves, so no attacker can rebind it).
 DEFAULT_HOSTS = ("localhost", "testserver")
+#: Paths whose bodies may exceed the general cap, and their own cap.
+BODY_LIMITS = {"/api/park": MAX_PARK_BODY_BYTES, "/api/park/preview": MAX_PARK_BODY_BYTES}
 
 
 def _split_host(value: str) -> str:
@@ -70,11 +74,13 @@ class GuardMiddleware:
         allowed_hosts: Iterable[str] = (),
         allowed_origins: Iterable[str] = (),
         max_body: int = MAX_BODY_BYTES,
+        body_limits: dict[str, int] | None = None,
     ) -> None:
         self.app = app
         self.hosts = tuple(DEFAULT_HOSTS) + tuple(allowed_hosts)
         self.origins = tuple(o.rstrip("/") for o in allowed_origins)
         self.max_body = int(max_body)
+        self.body_limits = dict(BODY_LIMITS if body_limits is None else body_limits)
 
     async def __call__(self, scope, receive, send):
         kind = scope["type"]
@@ -95,20 +101,20 @@ class GuardMiddleware:
             )  # fmt: skip
         if kind == "websocket":
             return await self.app(scope, receive, send)
+        max_body = self.body_limits.get(scope.get("path", ""), self.max_body)
         length = headers.get("content-length")
         if length is not None:
             try:
-                too_big = int(length) > self.max_body
+                too_big = int(length) > max_body
             except ValueError:
                 return await self._refuse(kind, send, 400, f"content-length: {length!r}")
             if too_big:
-                return await self._too_big(send, length)
-        return await self.app(scope, self._capped(receive, send), send)
+                return await self._too_big(send, length, max_body)
+        return await self.app(scope, self._capped(receive, send, max_body), send)
 
-    def _capped(self, receive, send):
+    def _capped(self, receive, send, max_body: int):
         """``receive`` that stops a chunked body once it passes the cap (413)."""
         seen = 0
-        max_body = self.max_body
 
         async def recv():
             nonlocal seen
@@ -116,15 +122,15 @@ class GuardMiddleware:
             if msg["type"] == "http.request":
                 seen += len(msg.get("body", b""))
                 if seen > max_body:
-                    await self._too_big(send, f"more than {seen}")
+                    await self._too_big(send, f"more than {seen}", max_body)
                     return {"type": "http.disconnect"}
             return msg
 
         return recv
 
-    async def _too_big(self, send, length) -> None:
+    async def _too_big(self, send, length, max_body: int) -> None:
         await self._refuse(
-            "http", send, 413, f"body: {length} bytes is over the limit of {self.max_body} bytes"
+            "http", send, 413, f"body: {length} bytes is over the limit of {max_body} bytes"
         )
 
     @staticmethod

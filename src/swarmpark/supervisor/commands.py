@@ -19,6 +19,7 @@ from shapely.ops import nearest_points, unary_union
 
 from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon
+from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
@@ -132,7 +133,9 @@ class CommandsMixin:
         # The order the operator listed the skids in must not matter: lay out and assign in
         # the fleet's order (robots sorted by id, world.build.robot_order_key).
         idx = np.sort(idx)
-        boundary = as_simple_polygon(cmd.boundary, "park.boundary")
+        boundary = as_simple_polygon(
+            cmd.boundary, "park.boundary", max_vertices=MAX_BOUNDARY_VERTICES
+        )
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.info.footprints[i] for i in idx]
         # The skids enter from their side: the opening is the boundary point nearest to them.

@@ -27,6 +27,7 @@ from swarmpark.core.geometry import (
     GeometryError,
 )
 from swarmpark.core.limits import (
+    MAX_BOUNDARY_VERTICES,
     MAX_COORDINATE_M,
     MAX_DURATION_S,
     MAX_FOOTPRINT_M,
@@ -72,6 +73,8 @@ Point = Annotated[list[Coord], Field(min_length=2, max_length=2)]
 PoseDeg = Annotated[list[float], Field(min_length=3, max_length=3)]
 #: A polygon (boundary, wall, obstacle) or a path: at most MAX_POLYGON_VERTICES points.
 Polygon = Annotated[list[Point], Field(max_length=MAX_POLYGON_VERTICES)]
+#: A park boundary: at most MAX_BOUNDARY_VERTICES points (a surveyed outline may be dense).
+Boundary = Annotated[list[Point], Field(max_length=MAX_BOUNDARY_VERTICES)]
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False, le=1e6)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False, le=1e6)]
 #: A robot or person id as referenced (commands, faults): bounded length.
@@ -202,7 +205,7 @@ class PersonSpec(_Model):
 
 class ParkCmd(_Model):
     robots: RobotList
-    boundary: Polygon
+    boundary: Boundary
     heading_deg: HeadingDeg | Literal["auto"] = 0.0
     method: Annotated[str, _METHODS.as_field()] = "stacking"
     margin_m: NonNegFloat = 0.3
