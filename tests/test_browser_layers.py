@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import socket
 import threading
 import time
@@ -30,6 +31,7 @@ CHROMIUM_ARGS = [
 ]
 DATA = Path(__file__).parent / "data"
 ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
+DOC_IMG = Path(__file__).parents[1] / "docs" / "img" / "ui-sensing-1024x768.png"
 #: The colours app.js draws the layers in (DETECTED_COLOUR, TRACKED_COLOUR).
 DETECTED_RGB = (208, 64, 255)
 TRACKED_RGB = (255, 210, 60)
@@ -259,5 +261,43 @@ def test_tracked_people_with_velocity_arrows_and_the_panel_after_a_goto(browser,
     # A stop of s2 becomes its last order.
     server.call("POST", "/api/stop", {"robots": ["s2"]})
     pg.wait_for_function("document.getElementById('rp-order').textContent.startsWith('stop at')")
+    pg.close()
+    assert not errors, errors
+
+
+def test_the_skid_panel_and_the_layers_fit_at_1024_by_768(browser, server):
+    """At 1024 x 768 the panel of a clicked skid is on screen without scrolling, next to the
+    E-STOP and the map with its detections. With ``SWARMPARK_DOC_SHOTS=1`` the screenshot
+    also goes to docs/img/ui-sensing-1024x768.png."""
+    server.call("POST", "/api/scenario", {"name": "ui-sensing.yaml"})
+    server.call("POST", "/api/sim", {"paused": False, "speed": 2.0})
+    pg = browser.new_page(viewport={"width": 1024, "height": 768})
+    errors: list[str] = []
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    pg.goto(server.url + "/")
+    pg.wait_for_function(
+        "(() => { const f = window.swarmpark.S.frame; return f && f.t_s > 6 && f.robot_info && "
+        "window.swarmpark.S.drawn.detected > 20; })()",
+        timeout=30_000,
+    )
+    full = _pause_and_settle(pg, server)
+    _click_robot(pg, full, 0)
+    pg.wait_for_function("document.getElementById('rp-id').textContent === 'd1'")
+    for sel in ("#robot-box", "#estop"):
+        box = pg.locator(sel).bounding_box()
+        assert box is not None and box["y"] >= 0 and box["y"] + box["height"] <= 768, (sel, box)
+        assert box["x"] >= 0 and box["x"] + box["width"] <= 1024, (sel, box)
+    assert pg.locator("#rp-loc").text_content().endswith(" cm")
+    # The link badge and "Resume all" are on screen beside the pinned e-stop, not under it
+    # or scrolled off the top bar.
+    estop_left = pg.locator("#estop-box").bounding_box()["x"]
+    for sel in ("#conn", "#resume-all", "#sim-time"):
+        box = pg.locator(sel).bounding_box()
+        assert box["x"] >= 0 and box["x"] + box["width"] <= estop_left, (sel, box, estop_left)
+    ARTIFACTS.mkdir(exist_ok=True)
+    pg.screenshot(path=str(ARTIFACTS / "ui-sensing-1024x768.png"))
+    if os.environ.get("SWARMPARK_DOC_SHOTS") == "1":
+        DOC_IMG.parent.mkdir(parents=True, exist_ok=True)
+        pg.screenshot(path=str(DOC_IMG))
     pg.close()
     assert not errors, errors
