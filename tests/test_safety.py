@@ -377,13 +377,30 @@ def test_a_crowd_of_viewers_gets_frames_in_turns(monkeypatch):
     crowd = [Client() for _ in range(4)]  # stride 2: every viewer gets every other frame
     s.clients.update(crowd)
     got = []
-    for _ in range(6):
+    held = [dict() for _ in crowd]  # what each viewer has merged, as the page does
+    missed_slow = [False] * 4
+    kinds = []
+    for k in range(8):
+        if k == 3:  # a new goal: the next frame carries a slow part (goals)
+            s.sup.command("goto", {"robot": "s1", "pose": [9.0, 2.0, 0.0]})
         s.broadcast()
         got.append([c.queue.qsize() for c in crowd])
-        for c in crowd:  # the viewers read what they got
-            while not c.queue.empty():
-                msg = json.loads(c.queue.get_nowait())
-                assert msg["full"] is True  # after a skipped frame, a whole one
+        slow = s.encoder.last_had_slow
+        for j, c in enumerate(crowd):  # the viewers read what they got
+            if c.queue.empty():
+                missed_slow[j] |= slow
+                continue
+            msg = json.loads(c.queue.get_nowait())
+            # Whole after a skipped frame that carried a slow part (or the first), else a
+            # delta: the skipped frames changed nothing a delta would not carry.
+            assert msg["full"] is (missed_slow[j] or not held[j]), (k, j, msg["full"])
+            kinds.append(msg["full"])
+            missed_slow[j] = False
+            held[j] = msg if msg["full"] else {**held[j], **msg}
+    assert True in kinds and False in kinds  # both happened
+    full = s.snapshot()
+    for h in held:  # every viewer holds the current goals
+        assert h["goals"] == full["goals"]
     sent = np.array(got)
-    assert sent.sum(axis=1).tolist() == [2] * 6  # two sends per frame, not four
-    assert sent.sum(axis=0).tolist() == [3] * 4  # everyone gets half of the frames
+    assert sent.sum(axis=1).tolist() == [2] * 8  # two sends per frame, not four
+    assert sent.sum(axis=0).tolist() == [4] * 4  # everyone gets half of the frames

@@ -134,6 +134,9 @@ class FrameEncoder:
         self._frames = 0
         self.metrics_now = True
         self._cache_ref: dict[str, Any] = {}
+        #: Whether the last frame's delta carried a slow part (a viewer that missed it
+        #: needs a full frame; one that missed only frames without any can take a delta).
+        self.last_had_slow = True
 
     # ------------------------------------------------------------------ slow parts
 
@@ -351,6 +354,7 @@ class FrameEncoder:
                 changed["metrics"] = m
             self.metrics_now = False
         self._frames += 1
+        self.last_had_slow = bool(changed)
         self._cache.update(changed)
         delta = {**fast, "full": False, **changed} if want_delta else None
         full = {**fast, "full": True, **self._cache} if want_full else None

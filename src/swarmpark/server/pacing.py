@@ -158,13 +158,18 @@ class Pacing:
         """Queue an encoded frame to every viewer (on the loop); returns the delta's bytes."""
         clients = list(self.clients)
         stride = -(-len(clients) // viewers.SENDS_PER_FRAME)
+        slow = self.encoder.last_had_slow
         for c in clients:
             if stride > 1 and (self.seq + c.slot) % stride:
-                c.needs_full = True  # not its turn: the next frame it gets is whole
+                # Not its turn. If this frame carries a slow part (goals, paths, ...), the
+                # next frame it gets is whole; if not, the next delta is all it needs (the
+                # fast parts are whole in every frame), a fraction of the bytes.
+                if slow:
+                    c.needs_full = True
                 continue
             c.offer(d_msg, f_msg)
             if c.overflows > MAX_OVERFLOWS:
-                c.closed = True
+                c.close()
                 self.clients.discard(c)
                 log.warning("a viewer too slow for the frames was disconnected")
         self.last_message_bytes = len(d_msg)

@@ -45,6 +45,12 @@ class Client:
     #: Its turn among the viewers when there are more than :data:`SENDS_PER_FRAME`.
     slot: int = field(default_factory=lambda: next(_slots))
 
+    def close(self) -> None:
+        """Drop the viewer: its sender ends after the frames queued (a ``None`` wakes it)."""
+        self.closed = True
+        with contextlib.suppress(asyncio.QueueFull):
+            self.queue.put_nowait(None)
+
     def offer(self, delta: str, full: str | None) -> None:
         msg = full if self.needs_full else delta
         if msg is None:

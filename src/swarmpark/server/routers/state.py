@@ -3,7 +3,6 @@ and the WebSocket that streams frames."""
 
 from __future__ import annotations
 
-import asyncio
 import json
 from typing import Annotated
 
@@ -94,11 +93,11 @@ async def stream(ws: WebSocket):
     async def sender() -> None:
         # A viewer too slow to drain its queue is dropped from the broadcast by the session
         # (client.closed) and its connection closed here.
+        # (No timeout around the wait: Client.close wakes it with a None.)
         while not client.closed:
-            try:
-                msg = await asyncio.wait_for(client.queue.get(), 1.0)
-            except TimeoutError:
-                continue
+            msg = await client.queue.get()
+            if msg is None:
+                break
             await ws.send_text(msg)
             client.overflows = 0  # it keeps up
 
