@@ -35,6 +35,8 @@ the smallest spacing.
 """
 
 from swarmpark.layout.convex.allocation import MAX_REBALANCE_ROUNDS, largest, solve
+from swarmpark.layout.convex.columns import SCHEMES, PieceSolution, solve_piece
+from swarmpark.layout.convex.graph import ConstraintGraph, from_arrangement, from_columns
 from swarmpark.layout.convex.pieces import (
     CUT_WEIGHT,
     DECOMPOSITIONS,
@@ -48,16 +50,30 @@ from swarmpark.layout.convex.program import (
     ACTIVE_TOL_M,
     HOLD_SLACK_M,
     MAX_STRUCTURED_ITERATIONS,
-    SCHEMES,
-    PieceSolution,
-    solve_piece,
+)
+from swarmpark.layout.convex.refine import (
+    DistanceConstraints,
+    cells_around,
+    distance_constraints,
+    free_segments,
+    refine,
+    seeded,
 )
 
 __all__ = [
     "SCHEMES",
     "ConvexPiece",
     "PieceSolution",
+    "ConstraintGraph",
+    "DistanceConstraints",
     "convex_pieces",
+    "from_arrangement",
+    "from_columns",
+    "free_segments",
+    "cells_around",
+    "distance_constraints",
+    "seeded",
+    "refine",
     "solve",
     "largest",
     "solve_piece",
