@@ -204,6 +204,9 @@ class _Pieces:
         self.half = skids.half
         self.pieces = pieces
         self.order = np.argsort(-(self.half[:, 0] * self.half[:, 1]), kind="stable")
+        # A piece's solution depends only on the sizes it holds: moving skids between
+        # pieces shifts who is where, mostly among equal sizes, so most re-solves repeat.
+        self._cache: dict = {}
 
     def groups(self, counts) -> list[np.ndarray]:
         groups, k = [], 0
@@ -216,14 +219,17 @@ class _Pieces:
         self, p: int, members: np.ndarray, *, structured: bool = False, plan=None
     ) -> PieceSolution | None:
         """Piece ``p`` holding ``members`` (the search solves without structure)."""
-        return solve_piece(
-            self.pieces[p],
-            self.half[members],
-            self.region.margin,
-            structured=structured,
-            plan=plan,
-            walls=self.segs,
-        )
+        key = (p, self.half[members].tobytes(), structured, plan)
+        if key not in self._cache:
+            self._cache[key] = solve_piece(
+                self.pieces[p],
+                self.half[members],
+                self.region.margin,
+                structured=structured,
+                plan=plan,
+                walls=self.segs,
+            )
+        return self._cache[key]
 
 
 def _feasible(spread: _Pieces, counts: np.ndarray, caps: np.ndarray):

@@ -22,6 +22,7 @@ optimal layout can increase.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import cvxpy as cp
@@ -211,7 +212,10 @@ def solve_lp(prog: Program, margin: float, held=None, hold_values=None):
     z = cp.Variable(prog.nvar)
     problem = cp.Problem(cp.Maximize(z[prog.nvar - 1]), [a @ z <= b])
     try:
-        problem.solve(solver=SOLVER)
+        with warnings.catch_warnings():
+            # "Solution may be inaccurate": the rows are checked below instead.
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=SOLVER)
     except cp.error.SolverError:
         return None
     if problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or z.value is None:
