@@ -332,8 +332,9 @@ def capacity(
     """The largest layout of one footprint size: ``len(result.poses)`` skids fit.
 
     Stacking is a greedy scan, so its count is a lower bound on what a human could fit;
-    ``potential`` spreads the stacking layout; ``convex`` returns the largest count for
-    which its structured problem is feasible (at most the stacking count).
+    ``potential`` spreads the stacking layout; ``convex`` holds at least the stacking count
+    (the stacking layout's constraint graph seeds its program) and tries a few more with
+    its column plans.
     ``report["capacity"]`` holds the count. Parameters as in :func:`layout`.
     """
     fill = get_method(method).fill
