@@ -152,7 +152,7 @@ def _finish(region: Region, skids: Skids, cands: list, segs: np.ndarray):
     info["solver"] = SOLVER
     done = refine(segs, start, skids.half, region.margin)
     if done is not None and _quality(region, done[0], skids.half) >= quality - 1e-7:
-        centres, rinfo, _ = done
+        centres, rinfo = done[0], done[1]
         info.update(rinfo)
     else:
         centres = start

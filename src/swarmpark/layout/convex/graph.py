@@ -27,7 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ConstraintGraph", "from_columns", "from_arrangement", "transitive_reduction"]
+__all__ = [
+    "ConstraintGraph",
+    "from_columns",
+    "from_arrangement",
+    "from_relations",
+    "axis_relations",
+    "transitive_reduction",
+]
 
 #: Slack (metres) when reading which axis separates two skids of an arrangement: stacking
 #: keeps its gaps to 1e-9 m.
@@ -127,6 +134,27 @@ def from_columns(columns: list[list[int]], name: str) -> ConstraintGraph:
     )
 
 
+def axis_relations(centres: np.ndarray, half: np.ndarray, margin: float):
+    """``(left, below)``, boolean ``(n, n)``: ``left[i, j]`` if skid ``i`` is left of ``j``
+    by at least the margin, ``below[i, j]`` likewise on y (both can hold)."""
+    c = np.asarray(centres, dtype=float)
+    hs = np.asarray(half, dtype=float)
+    dx = c[None, :, 0] - c[:, None, 0]  # dx[i, j] = x_j - x_i
+    dy = c[None, :, 1] - c[:, None, 1]
+    need_x = hs[:, None, 0] + hs[None, :, 0] + margin - SEPARATION_TOL_M
+    need_y = hs[:, None, 1] + hs[None, :, 1] + margin - SEPARATION_TOL_M
+    return dx >= need_x, dy >= need_y
+
+
+def from_relations(left: np.ndarray, below: np.ndarray, name: str) -> ConstraintGraph:
+    """H from ``left`` and V from ``below`` minus the pairs already in H, both
+    transitively reduced."""
+    below = below & ~(left | left.T)
+    return ConstraintGraph(
+        len(left), transitive_reduction(left), transitive_reduction(below), 0, name
+    )
+
+
 def from_arrangement(
     centres: np.ndarray, half: np.ndarray, margin: float, name: str = "arrangement"
 ) -> ConstraintGraph:
@@ -144,15 +172,7 @@ def from_arrangement(
     ValueError
         Two skids are closer than ``margin`` on both axes (the arrangement overlaps).
     """
-    c = np.asarray(centres, dtype=float)
-    hs = np.asarray(half, dtype=float)
-    n = len(c)
-    dx = c[None, :, 0] - c[:, None, 0]  # dx[i, j] = x_j - x_i
-    dy = c[None, :, 1] - c[:, None, 1]
-    need_x = hs[:, None, 0] + hs[None, :, 0] + margin - SEPARATION_TOL_M
-    need_y = hs[:, None, 1] + hs[None, :, 1] + margin - SEPARATION_TOL_M
-    left = dx >= need_x  # i left of j, far enough apart on x
-    below = (dy >= need_y) & ~(left | left.T)  # the rest: i below j
+    left, below = axis_relations(centres, half, margin)
     joined = left | left.T | below | below.T
     np.fill_diagonal(joined, True)
     if not joined.all():
@@ -161,4 +181,4 @@ def from_arrangement(
             f"from_arrangement: skids {int(i)} and {int(j)} are closer than the margin "
             f"{margin:g} m on both axes"
         )
-    return ConstraintGraph(n, transitive_reduction(left), transitive_reduction(below), 0, name)
+    return from_relations(left, below, name)

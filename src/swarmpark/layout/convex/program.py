@@ -119,6 +119,19 @@ class ProgramBuilder:
         h += (-np.einsum("kd,kd->k", np.abs(a), self.half[i] + self.half[j])).tolist()
         self.kinds += [kind] * len(i)
 
+    def gap_rows(self, i: np.ndarray, j: np.ndarray, a: np.ndarray, minimum: float):
+        """Rows ``a . (c_j - c_i) - support >= minimum``: a gap that is kept but is not an
+        item of the objective."""
+        i, j = np.asarray(i, dtype=int), np.asarray(j, dtype=int)
+        a = np.asarray(a, dtype=float).reshape(-1, 2)
+        rows, cols, vals, rhs = self._rows
+        r = len(rhs) + np.arange(len(i))
+        rows += np.repeat(r, 4).tolist()
+        cols += np.column_stack([j, self.n + j, i, self.n + i]).ravel().tolist()
+        vals += np.column_stack([-a[:, 0], -a[:, 1], a[:, 0], a[:, 1]]).ravel().tolist()
+        support = np.einsum("kd,kd->k", np.abs(a), self.half[i] + self.half[j])
+        rhs += (-support - minimum).tolist()
+
     def separator(self, s: int, into: list[int], out: list[int]):
         """Skids ``into`` left of separator ``s`` (alpha items), ``out`` right of it."""
         rows, cols, vals, h = self._items

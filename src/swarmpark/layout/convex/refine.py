@@ -22,9 +22,13 @@ robots that is the paper's centre direction), and ``D_ij`` is the centre distanc
 ``a_ij`` at which the footprints keep the margin,
 ``D_ij = |a_x| (l_i + l_j) / 2 + |a_y| (w_i + w_j) / 2 + margin``: the plane normal to
 ``a_ij`` then separates the footprints by the margin, and ``||p_i - p_j|| >= D_ij`` follows.
-Every pair ``i < j`` gets one (as in eq. 4), with the gap beyond ``D_ij - margin`` a
-spacing item of the max-min objective. The H and V edges are the cases ``a = (1, 0)`` and
-``(0, 1)``; a diagonal ``a_ij`` lets neighbouring columns interleave. ``p^`` satisfies
+Neighbouring pairs (closer than the smallest skid side plus twice the margin) get one,
+with the gap beyond ``D_ij - margin`` a spacing item of the max-min objective; the H and V
+edges are the cases ``a = (1, 0)`` and ``(0, 1)``, and a diagonal ``a_ij`` lets
+neighbouring columns interleave. Eq. 4 is written for every pair; the far pairs (apart by
+at least sqrt(2) times the margin, so by the margin on x or on y) keep that axis order
+through the transitively reduced H and V graphs of ``p^`` instead, which keeps the program
+O(N) rows per round rather than O(N^2) (100 skids: 1.6 s -> see docs/layout.md). ``p^`` satisfies
 every row (its gap along ``a_ij`` is its true gap), so each round of re-linearizing at the
 new solution keeps the max-min spacing from falling. Structured optimization follows.
 """
@@ -36,7 +40,12 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from swarmpark.layout.convex.graph import ConstraintGraph, from_arrangement
+from swarmpark.layout.convex.graph import (
+    ConstraintGraph,
+    axis_relations,
+    from_arrangement,
+    from_relations,
+)
 from swarmpark.layout.convex.program import (
     MAX_STRUCTURED_ITERATIONS,
     Program,
@@ -58,7 +67,7 @@ __all__ = [
 ]
 
 #: Rounds of re-linearizing the distance constraints (eq. 4) at the last solution.
-MAX_LINEARIZATION_ROUNDS = 4
+MAX_LINEARIZATION_ROUNDS = 8
 #: Stop re-linearizing when the max-min spacing grew by less than this (metres).
 LINEARIZATION_GAIN_M = 1e-4
 #: Slack (metres) when testing that a skid keeps the margin from an edge's line.
@@ -129,10 +138,11 @@ def cells_around(segs: np.ndarray, centres: np.ndarray, half: np.ndarray, margin
     return skid, normal.reshape(-1, 2), offset.reshape(-1), np.ones(n * w)
 
 
-def distance_constraints(centres: np.ndarray, half: np.ndarray, margin: float):
-    """Eq. 4 for every pair ``i < j``, linearized at ``centres`` (see the module doc)."""
+def distance_constraints(centres: np.ndarray, half: np.ndarray, margin: float, pairs=None):
+    """Eq. 4 for the pairs ``(i, j)`` (default: every ``i < j``), linearized at ``centres``
+    (see the module doc)."""
     n = len(centres)
-    i, j = np.triu_indices(n, 1)
+    i, j = np.triu_indices(n, 1) if pairs is None else pairs
     diff = centres[j] - centres[i]
     reach = half[i] + half[j]
     gap = np.abs(diff) - reach  # per-axis gaps between the footprints
@@ -148,13 +158,39 @@ def distance_constraints(centres: np.ndarray, half: np.ndarray, margin: float):
     return DistanceConstraints(i, j, a, d)
 
 
-def _program(segs, centres, half, margin) -> tuple[Program, DistanceConstraints]:
+def neighbours(centres: np.ndarray, half: np.ndarray, margin: float):
+    """``(pairs, graph)``: the pairs ``i < j`` closer than :func:`neighbour_gap` (they get
+    distance constraints) and the H and V graphs of the other pairs (each apart on x or y
+    by at least the margin, since their Euclidean gap is at least sqrt(2) times it)."""
+    diff = np.abs(centres[None, :, :] - centres[:, None, :])
+    gaps = np.maximum(diff - (half[None, :, :] + half[:, None, :]), 0.0)
+    gap = np.hypot(gaps[..., 0], gaps[..., 1])
+    far = gap >= neighbour_gap(half, margin)
+    left, below = axis_relations(centres, half, margin)
+    graph = from_relations(left & far, below & far, "far pairs")
+    i, j = np.nonzero(np.triu(~far, 1))
+    return (i, j), graph
+
+
+def neighbour_gap(half: np.ndarray, margin: float) -> float:
+    """Gap (metres) below which two skids are neighbours: the smallest skid side plus twice
+    the margin, so a pair with a skid between them is never one (and the far pairs' graph
+    implies nothing about neighbours)."""
+    return float(2.0 * half.min() + 2.0 * margin)
+
+
+def _program(segs, centres, half, margin) -> tuple[Program, DistanceConstraints, object]:
     b = ProgramBuilder(half)
     b.cell_rows(*cells_around(segs, centres, half, margin))
-    dc = distance_constraints(centres, half, margin)
+    pairs, graph = neighbours(centres, half, margin)
+    dc = distance_constraints(centres, half, margin, pairs)
     b.gap_items(dc.i, dc.j, dc.a, "distance")
+    # Far pairs keep their axis order (eqs. 5-6); not items: their gap on that axis can be
+    # small while the pair is far apart.
+    b.gap_rows(graph.h[:, 0], graph.h[:, 1], np.tile([1.0, 0.0], (len(graph.h), 1)), margin)
+    b.gap_rows(graph.v[:, 0], graph.v[:, 1], np.tile([0.0, 1.0], (len(graph.v), 1)), margin)
     b.r_items()
-    return b.build(), dc
+    return b.build(), dc, graph
 
 
 def seeded(segs: np.ndarray, seed: np.ndarray, half: np.ndarray, margin: float):
@@ -187,25 +223,26 @@ def refine(
     best = None
     used = 0
     for _ in range(max(rounds, 1)):
-        prog, dc = _program(segs, cur, half, margin)
+        prog, dc, graph = _program(segs, cur, half, margin)
         sol = solve_lp(prog, margin)
         if sol is None:
             break
         used += 1
         gain = np.inf if best is None else sol[1] - best[1][1]
-        best = (prog, sol, dc)
+        best = (prog, sol, dc, graph)
         cur = prog.centres(sol[0])
         if gain < LINEARIZATION_GAIN_M:
             break
     if best is None:
         return None
-    prog, sol, dc = best
+    prog, sol, dc, graph = best
     done = structured(prog, margin, sol, max_iterations)
     info = {
         "objective_m": done.objective,
         "linearization_rounds": used,
         "distance_constraints": len(dc.i),
+        "far_pair_edges": len(graph.h) + len(graph.v),
         "iterations": done.iterations,
         "held": done.held,
     }
-    return prog.centres(done.z), info, dc
+    return prog.centres(done.z), info, dc, graph
