@@ -10,7 +10,7 @@ import shapely
 from shapely.geometry import Polygon
 
 from swarmpark.core.geometry import Footprint
-from swarmpark.layout import capacity, layout
+from swarmpark.layout import LayoutError, capacity, layout
 from swarmpark.layout.convex import (
     distance_constraints,
     free_segments,
@@ -189,3 +189,24 @@ def test_linearized_distance_constraints_raise_the_spacing_beyond_the_columns():
     assert res.report["linearization_rounds"] >= 2
     rows = np.unique(np.round(res.poses[:, 1], 3))
     assert len(rows) == 3
+
+
+@pytest.mark.parametrize("name", ["triangle", "L", "random-2"])
+def test_mixed_sizes_fit_wherever_stacking_fits_them(name):
+    boundary = BOUNDARIES[name]
+    small = Footprint(0.9, 0.6)
+    k = len(capacity(boundary, small, method="stacking", margin_m=MARGIN).poses)
+    # As many pairs of both sizes as stacking fits (mixed sizes pack less well).
+    for pairs in range(k // 2, 0, -1):
+        fps = [SKID, small] * pairs + [small]
+        try:
+            st = layout(boundary, fps, method="stacking", margin_m=MARGIN)
+            break
+        except LayoutError:
+            continue
+    assert pairs >= 2
+    res = layout(boundary, fps, method="convex", margin_m=MARGIN)
+    assert res.method == "convex"
+    chk = check_layout(res.poses, fps, Polygon(boundary), MARGIN)
+    assert chk.ok, chk.problems()
+    assert res.report["min_spacing_m"] >= st.report["min_spacing_m"] - 1e-6
