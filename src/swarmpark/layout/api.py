@@ -121,10 +121,10 @@ def _finish_checked(boundary_world, region, skids, centres, method, info, openin
     """:func:`_finish`, falling back to the method's ``fallback`` (convex: stacking) when its
     solution fails validation.
 
-    The convex program keeps its constraints only within solver tolerance, and on some
-    non-convex boundaries (split into pieces) a footprint can end up outside by more than the
-    validation allows. An operator is then better served by the stacking layout, with a
-    notice, than by a refusal.
+    The convex program keeps its constraints only within solver tolerance; should a solution
+    still fail validation, an operator is better served by the stacking layout, with a
+    notice, than by a refusal. (The known case, a skid within the margin of a wall across a
+    cut between convex pieces, is fixed at its root in ``convex.columns.wall_cuts``.)
     """
     try:
         return _finish(boundary_world, region, skids, centres, method, info, opening)

@@ -1,7 +1,8 @@
-"""Convex layout over the pieces of the free region: skids shared among the pieces in
-proportion to how many fit in each, moved between pieces while that raises the smallest
-spacing, then each piece solved with structured optimization; and the entry points
-:func:`solve` (given skids) and :func:`largest` (as many of one size as fit)."""
+"""Convex layout of given skids (:func:`solve`) and of as many of one size as fit
+(:func:`largest`): the starts (the column plans over the convex pieces, and the stacking
+layouts' constraint graphs), the best of them refined by the linearized distance
+constraints. For the column plans, skids are shared among the pieces in proportion to how
+many fit in each and moved between pieces while that raises the smallest spacing."""
 
 from __future__ import annotations
 
