@@ -121,10 +121,10 @@ def _finish_checked(boundary_world, region, skids, centres, method, info, openin
     """:func:`_finish`, falling back to the method's ``fallback`` (convex: stacking) when its
     solution fails validation.
 
-    The convex program keeps its constraints only within solver tolerance, and on some
-    non-convex boundaries (split into pieces) a footprint can end up outside by more than the
-    validation allows. An operator is then better served by the stacking layout, with a
-    notice, than by a refusal.
+    The convex program keeps its constraints only within solver tolerance; should a solution
+    still fail validation, an operator is better served by the stacking layout, with a
+    notice, than by a refusal. (The known case, a skid within the margin of a wall across a
+    cut between convex pieces, is fixed at its root in ``convex.columns.wall_cuts``.)
     """
     try:
         return _finish(boundary_world, region, skids, centres, method, info, opening)
@@ -332,8 +332,9 @@ def capacity(
     """The largest layout of one footprint size: ``len(result.poses)`` skids fit.
 
     Stacking is a greedy scan, so its count is a lower bound on what a human could fit;
-    ``potential`` spreads the stacking layout; ``convex`` returns the largest count for
-    which its structured problem is feasible (at most the stacking count).
+    ``potential`` spreads the stacking layout; ``convex`` holds at least the stacking count
+    (the stacking layout's constraint graph seeds its program) and tries a few more with
+    its column plans.
     ``report["capacity"]`` holds the count. Parameters as in :func:`layout`.
     """
     fill = get_method(method).fill

@@ -119,7 +119,8 @@ def check_layout(
         tree = shapely.STRtree(polys)
         # Nearest other footprint of each one gives the smallest spacing.
         _, dist = tree.query_nearest(polys, exclusive=True, return_distance=True, all_matches=False)
-        min_spacing = float(dist.min())
+        # Footprints equal to each other are left out of ``exclusive`` queries (found below).
+        min_spacing = float(dist.min()) if len(dist) else float("inf")
         # Pairs within the margin: exact gap (negative = penetration depth) by SAT.
         near = tree.query(polys, predicate="dwithin", distance=max(margin_m - tol_m, 0.0))
         near = near[:, near[0] < near[1]]

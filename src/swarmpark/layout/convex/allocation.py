@@ -1,7 +1,8 @@
-"""Convex layout over the pieces of the free region: skids shared among the pieces in
-proportion to how many fit in each, moved between pieces while that raises the smallest
-spacing, then each piece solved with structured optimization; and the entry points
-:func:`solve` (given skids) and :func:`largest` (as many of one size as fit)."""
+"""Convex layout of given skids (:func:`solve`) and of as many of one size as fit
+(:func:`largest`): the starts (the column plans over the convex pieces, and the stacking
+layouts' constraint graphs), the best of them refined by the linearized distance
+constraints. For the column plans, skids are shared among the pieces in proportion to how
+many fit in each and moved between pieces while that raises the smallest spacing."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ import numpy as np
 import shapely
 
 from swarmpark.layout import stacking
+from swarmpark.layout.convex.columns import PieceSolution, solve_piece
 from swarmpark.layout.convex.pieces import CUT_WEIGHT, ConvexPiece, convex_pieces
-from swarmpark.layout.convex.program import ACTIVE_TOL_M, SOLVER, PieceSolution, solve_piece
+from swarmpark.layout.convex.program import ACTIVE_TOL_M, SOLVER
+from swarmpark.layout.convex.refine import free_segments, refine, seeded
 from swarmpark.layout.region import LayoutError, Region, Skids, describe_skids, make_skids
 
 __all__ = ["solve", "largest", "MAX_REBALANCE_ROUNDS"]
@@ -60,6 +63,52 @@ def _allocate(n: int, caps: np.ndarray) -> np.ndarray:
     return counts
 
 
+def _quality(region: Region, centres: np.ndarray, half: np.ndarray) -> float:
+    """Smallest gap of a layout: between two footprints or to the free region's edge."""
+    boxes = region.boxes(centres, half)
+    edge = shapely.distance(boxes, region.free.boundary).min()
+    if len(boxes) < 2:
+        return float(edge)
+    tree = shapely.STRtree(boxes)
+    _, dist = tree.query_nearest(boxes, exclusive=True, return_distance=True, all_matches=False)
+    return float(min(edge, dist.min()))
+
+
+def _seeded_candidates(region: Region, skids: Skids, segs: np.ndarray) -> list:
+    """``(quality, centres, details)`` from the constraint graphs of the stacking layouts
+    (column and row scan) of all the skids, where stacking fits them."""
+    n = len(skids)
+    out = []
+    for order in stacking.SCAN_ORDERS:
+        st = stacking.stack(region, skids, order=order, count=n)
+        if st.fits < n:
+            continue
+        found = seeded(segs, st.centres, skids.half, region.margin)
+        if found is None:
+            continue
+        centres, objective, graph = found
+        details = {
+            "scheme": f"stacking graph ({order})",
+            "h_edges": len(graph.h),
+            "v_edges": len(graph.v),
+            "objective_m": objective,
+        }
+        out.append((_quality(region, centres, skids.half), centres, details))
+    return out
+
+
+def _candidates(region: Region, skids: Skids, pieces: list[ConvexPiece], segs: np.ndarray):
+    """Every start for the distance program: the column plans over the pieces first (ties
+    go to them), then the stacking-seeded graphs."""
+    out = []
+    result = _solve_pieces(region, skids, pieces, segs)
+    if result is not None:
+        centres, info = result
+        out.append((_quality(region, centres, skids.half), centres, info))
+    out += [(q, c, {"seed": d}) for q, c, d in _seeded_candidates(region, skids, segs)]
+    return out
+
+
 def solve(region: Region, skids: Skids) -> tuple[np.ndarray, dict]:
     """Layout-frame centres ``(N, 2)`` by convex optimization, and details.
 
@@ -76,17 +125,40 @@ def solve(region: Region, skids: Skids) -> tuple[np.ndarray, dict]:
             f"convex: the free region is not convex; it was split into {len(pieces)} convex "
             f"pieces by {how} (skids keep at least half the margin from each cut)"
         )
-    result = _solve_pieces(region, skids, pieces)
-    if result is None:
-        fits = _largest_count(region, skids, pieces)
+    segs = free_segments(region.free)
+    cands = _candidates(region, skids, pieces, segs)
+    if not cands:
+        fits = _largest_count(region, skids, pieces, segs)
         raise LayoutError(
             f"park.boundary: only {fits} of {n} skids ({describe_skids(skids)}, margin "
             f"{region.margin:g} m) fit with method 'convex'",
             fits=fits,
         )
-    centres, info = result
+    centres, info = _finish(region, skids, cands, segs)
     info["decomposition"] = how
     info["notices"] = notices + info.get("notices", [])
+    return centres, info
+
+
+def _finish(region: Region, skids: Skids, cands: list, segs: np.ndarray):
+    """The best start (largest smallest gap; ties: the first), refined by the linearized
+    distance constraints (eqs. 3-4) and structured optimization."""
+    k = max(range(len(cands)), key=lambda i: cands[i][0] - 1e-9 * i)
+    quality, start, info = cands[k]
+    info = dict(info)
+    info.setdefault("pieces", [])
+    info.setdefault("notices", [])
+    info["start"] = "column plans" if "seed" not in info else info["seed"]["scheme"]
+    info["start_min_gap_m"] = quality
+    info["solver"] = SOLVER
+    done = refine(segs, start, skids.half, region.margin)
+    if done is not None and _quality(region, done[0], skids.half) >= quality - 1e-7:
+        centres, rinfo = done[0], done[1]
+        info.update(rinfo)
+    else:
+        centres = start
+        info.setdefault("iterations", 1)
+        info["notices"].append("convex: the distance program failed; kept its start")
     return centres, info
 
 
@@ -127,11 +199,15 @@ class _Pieces:
     """The skids of one layout spread over the pieces: who goes where for given counts
     (largest skids first, in piece order) and each piece's solution."""
 
-    def __init__(self, region: Region, skids: Skids, pieces: list[ConvexPiece]):
+    def __init__(self, region: Region, skids: Skids, pieces: list[ConvexPiece], segs):
         self.region = region
+        self.segs = segs
         self.half = skids.half
         self.pieces = pieces
         self.order = np.argsort(-(self.half[:, 0] * self.half[:, 1]), kind="stable")
+        # A piece's solution depends only on the sizes it holds: moving skids between
+        # pieces shifts who is where, mostly among equal sizes, so most re-solves repeat.
+        self._cache: dict = {}
 
     def groups(self, counts) -> list[np.ndarray]:
         groups, k = [], 0
@@ -144,9 +220,17 @@ class _Pieces:
         self, p: int, members: np.ndarray, *, structured: bool = False, plan=None
     ) -> PieceSolution | None:
         """Piece ``p`` holding ``members`` (the search solves without structure)."""
-        return solve_piece(
-            self.pieces[p], self.half[members], self.region.margin, structured=structured, plan=plan
-        )
+        key = (p, self.half[members].tobytes(), structured, plan)
+        if key not in self._cache:
+            self._cache[key] = solve_piece(
+                self.pieces[p],
+                self.half[members],
+                self.region.margin,
+                structured=structured,
+                plan=plan,
+                walls=self.segs,
+            )
+        return self._cache[key]
 
 
 def _feasible(spread: _Pieces, counts: np.ndarray, caps: np.ndarray):
@@ -203,28 +287,17 @@ def _rebalance(spread: _Pieces, counts: np.ndarray, caps: np.ndarray, solutions:
     return counts, solutions
 
 
-def _structured(spread: _Pieces, counts: np.ndarray, solutions: dict):
-    """Structured optimization in every piece, keeping each piece's column plan from the
-    search. ``(centres, info)`` or ``None``."""
+def _gather(spread: _Pieces, counts: np.ndarray, solutions: dict):
+    """Centres of every skid from the pieces' solutions, and the pieces' details."""
     n = len(spread.half)
     centres = np.full((n, 2), np.nan)
     details = []
-    iterations = 0
     first = np.inf
     for p, members in enumerate(spread.groups(counts)):
         if len(members) == 0:
             continue
-        prev = solutions.get(p)
-        plan = (
-            (prev.scheme, tuple(prev.columns))
-            if prev is not None and len(prev.columns) and sum(prev.columns) == len(members)
-            else None
-        )
-        sol = spread.solve(p, members, structured=True, plan=plan)
-        if sol is None:
-            return None
-        centres[members] = sol.corners + spread.half[members]
-        iterations = max(iterations, sol.iterations)
+        sol = solutions[p]
+        centres[members] = sol.centres
         first = min(first, sol.objective)
         details.append(
             {
@@ -233,79 +306,84 @@ def _structured(spread: _Pieces, counts: np.ndarray, solutions: dict):
                 "scheme": sol.scheme,
                 "columns": sol.columns,
                 "objective_m": sol.objective,
-                "structured_iterations": sol.iterations,
-                "held": sol.held,
             }
         )
-    info = {
-        "iterations": iterations,
-        "objective_m": first,
-        "pieces": details,
-        "solver": SOLVER,
-        "notices": [],
-    }
-    return centres, info
+    return centres, {"objective_m": first, "pieces": details, "notices": []}
 
 
-def _solve_pieces(region: Region, skids: Skids, pieces: list[ConvexPiece], structured=True):
-    """Allocate skids to pieces and solve each; ``None`` if they cannot all be placed.
-
-    Without ``structured`` only feasibility is decided (the centres returned are zeros).
-    """
+def _solve_pieces(region: Region, skids: Skids, pieces: list[ConvexPiece], segs, layout=True):
+    """Allocate skids to pieces and solve each (column plans, max-min); ``None`` if they
+    cannot all be placed. Without ``layout`` only feasibility is decided."""
     if not pieces:
         return None
     start = _initial_counts(region, skids, pieces)
     if start is None:
         return None
     counts, caps = start
-    spread = _Pieces(region, skids, pieces)
+    spread = _Pieces(region, skids, pieces, segs)
     found = _feasible(spread, counts, caps)
     if found is None:
         return None
     counts, solutions = found
-    counts, solutions = _rebalance(spread, counts, caps, solutions)
-    if not structured:
+    if not layout:
         return np.zeros((len(skids), 2)), {}
-    return _structured(spread, counts, solutions)
+    counts, solutions = _rebalance(spread, counts, caps, solutions)
+    return _gather(spread, counts, solutions)
 
 
-def _largest_count(region: Region, skids: Skids, pieces: list[ConvexPiece]) -> int:
-    """How many of the skids (largest first dropped last) the convex method can place."""
+def _subset(skids: Skids, idx: np.ndarray) -> Skids:
+    return Skids(tuple(skids.footprints[i] for i in idx), skids.half[idx], skids.offsets[idx])
+
+
+def _largest_count(region: Region, skids: Skids, pieces: list[ConvexPiece], segs) -> int:
+    """How many of the skids (smallest first, the largest dropped first) the convex method
+    places: at least as many as stacking (its graph seeds the program), more where the
+    column plans fit more."""
     order = np.argsort(-(skids.half[:, 0] * skids.half[:, 1]), kind="stable")
-    lo, hi = 0, len(skids) - 1  # the full set is known not to fit
+    lo = 0
+    for scan in stacking.SCAN_ORDERS:
+        st = stacking.stack(region, skids, order=scan)
+        lo = max(lo, st.fits)
+    hi = len(skids) - 1  # the full set is known not to fit
     while lo < hi:
         mid = (lo + hi + 1) // 2
-        sub = Skids(
-            tuple(skids.footprints[i] for i in order[-mid:]),
-            skids.half[order[-mid:]],
-            skids.offsets[order[-mid:]],
-        )
-        if _solve_pieces_feasible(region, sub, pieces):
+        sub = _subset(skids, order[-mid:])
+        if _solve_pieces(region, sub, pieces, segs, layout=False) is not None:
             lo = mid
         else:
             hi = mid - 1
     return lo
 
 
-def _solve_pieces_feasible(region: Region, skids: Skids, pieces: list[ConvexPiece]) -> bool:
-    return _solve_pieces(region, skids, pieces, structured=False) is not None
+#: ``largest`` tries at most this many skids beyond the stacking count.
+MAX_EXTRA = 4
 
 
-def largest(region: Region, footprint, upper: int) -> tuple[np.ndarray, dict]:
-    """The largest convex layout of one footprint, trying at most ``upper`` skids.
+def largest(region: Region, footprint, stacked: int) -> tuple[np.ndarray, dict]:
+    """The largest convex layout of one footprint. ``stacked`` skids fit by stacking, so as
+    many fit here (the stacking graph seeds the program); up to :data:`MAX_EXTRA` more are
+    tried with the column plans.
 
     Returns the centres ``(K, 2)`` (``K`` may be 0) and details.
     """
-    pieces, _ = _pieces_for(region, make_skids([footprint]).half)
-    lo, hi = 0, upper
+    pieces, how = _pieces_for(region, make_skids([footprint]).half)
+    segs = free_segments(region.free)
     best = None
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        res = _solve_pieces(region, make_skids([footprint] * mid), pieces)
-        if res is not None:
-            lo, best = mid, res
+    k = stacked
+    for extra in range(MAX_EXTRA + 1):
+        skids = make_skids([footprint] * (stacked + extra))
+        if extra == 0:
+            cands = _candidates(region, skids, pieces, segs) if stacked > 0 else []
         else:
-            hi = mid - 1
+            found = _solve_pieces(region, skids, pieces, segs)
+            cands = [] if found is None else [(_quality(region, found[0], skids.half), *found)]
+        if not cands:
+            break
+        best, k = (cands, skids), stacked + extra
     if best is None:
         return np.zeros((0, 2)), {"iterations": 0, "notices": ["convex: no skid fits"]}
-    return best
+    cands, skids = best
+    centres, info = _finish(region, skids, cands, segs)
+    info["decomposition"] = how
+    info["capacity_beyond_stacking"] = k - stacked
+    return centres, info

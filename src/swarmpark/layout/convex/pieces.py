@@ -22,7 +22,9 @@ __all__ = [
 ]
 
 #: Weight of a cut between convex pieces in the boundary-distance rows: a skid keeps
-#: ``R_j * weight`` from a cut, the skid on the other side as much.
+#: ``R_j * weight`` from a cut, the skid on the other side as much. Walls across a cut are
+#: not covered by this; the piece program keeps them at ``R_j`` by cutting planes
+#: (:func:`swarmpark.layout.convex.columns.wall_cuts`).
 CUT_WEIGHT = 0.5
 #: Free regions with more vertices than this (map staircases) are simplified first, by
 #: eroding by ``SIMPLIFY_TOL_M`` and simplifying with the same tolerance (stays inside).
