@@ -5,12 +5,30 @@ Starting from the stacking goals, each goal is a floating point repelled by ever
 (``1/d``, eq. 2); the goals follow the force ``-grad U`` (eq. 4) until the total energy
 (eq. 1) changes by less than a tolerance or an iteration cap is hit.
 
-Two variants, as in the paper's Fig. 5:
+Three variants: the paper's two of Fig. 5, and one with the distances measured between
+footprints:
 
 - ``"centroid"``: distances between goal centroids, and centroid to boundary points.
 - ``"vertex"``: distances between the rectangles' vertices (and vertex to boundary point);
-  the forces on a rectangle's vertices add up to the force on its centroid. This lets the
-  field see the size of each skid, which matters for mixed footprints.
+  the forces on a rectangle's vertices add up to the force on its centroid.
+- ``"footprint"`` (the default, ``"auto"``): ``dist`` in eqs. 2-3 is the distance between
+  the two goals' footprint rectangles (and from a footprint to a boundary point), i.e. the
+  gap the skids will actually have, instead of the distance between their centres. The
+  equations are otherwise as written (``1/d`` energies, ``-grad U`` forces).
+
+Why the default is not the paper's centroid field (issue 21): it is isotropic while a skid is
+half again as long as it is wide, so it spaces centres, not skids. For 9 skids of 1.2 x 0.8
+m in an 8 x 6 m box its lowest minimum found is a 4-2-3 arrangement with four skids end to
+end along the long side (closest pair 0.54 m; eq. 1 is 12.2 there against 12.8 for the 3 x 3
+grid, so no better search would fix it). The paper's vertex field sees the shape and settles
+in the 3 x 3 grid (0.86 m) but costs 16 times the pairs (10 s for 100 skids against 2 s).
+The footprint field also settles in the 3 x 3 grid (0.82 m; convex max-min: 0.90 m) at the
+centroid field's cost, and handles mixed sizes. Near capacity (24 skids in the L-bay of
+docs/layout.md: footprint 0.43 m, centroid and vertex 0.30 m; 9 in an 8 x 8 m diamond: all
+0.30 m) the closest pair can stay at the margin: eq. 1 lowers the sum of ``1/d``, not the
+smallest gap, and a pair pressed together by the walls is a constrained minimum of it. Every
+goal keeps the operator's heading in all variants, so the "appearance of disorder" the paper
+saw with vertices (rotated goals, Fig. 5) does not arise.
 
 Departures from the paper, for a layout that is always valid and a loop that terminates:
 
@@ -35,7 +53,12 @@ from swarmpark.layout.region import Region, Skids, rect_gaps
 
 __all__ = ["VARIANTS", "spread", "boundary_points", "local_terms", "total_energy"]
 
-VARIANTS = ("centroid", "vertex")
+VARIANTS = ("centroid", "vertex", "footprint")
+#: The variant ``"auto"`` picks: distances between footprints (module docstring).
+DEFAULT_VARIANT = "footprint"
+#: Footprint variant: distances below this (overlapping rectangles, a boundary point inside
+#: a footprint: only ever proposed, never kept) count as this, so the energy stays finite.
+_MIN_GAP_M = 1e-3
 #: Iteration cap (the paper's "set number of iterations").
 MAX_ITERATIONS = 300
 #: Stop when the total energy has changed by less than this fraction of it in each of
@@ -97,6 +120,8 @@ def local_terms(
     """
     n = len(others)
     rows = np.arange(n) if rows is None else np.asarray(rows)
+    if variant == "footprint":
+        return _footprint_terms(moving, others, half, bpts, rows, threshold_m, boundary_weight)
     p = _points(moving, half[rows], variant)  # (R, K, 2)
     q = _points(others, half, variant)  # (N, K, 2)
     r, k = p.shape[:2]
@@ -129,6 +154,36 @@ def local_terms(
         binv3 = binv * binv * binv
         bf = np.column_stack([(binv3 * bx).sum(axis=1), (binv3 * by).sum(axis=1)])
         force = force + b_scale * bf.reshape(r, k, 2).sum(axis=1)
+    return pair, boundary, force
+
+
+def _rect_distances(
+    c: np.ndarray, h: np.ndarray, q: np.ndarray, hq: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distances ``(R, M)`` between axis-aligned rectangles (centres ``c`` ``(R, 2)``, half
+    sizes ``h`` ``(R, 2)``) and rectangles ``q`` with half sizes ``hq`` (broadcast to
+    ``(R, M, 2)``; zero for points), and their gradients ``(R, M, 2)`` with respect to ``c``."""
+    dc = c[:, None, :] - q[None, :, :]
+    ax = np.maximum(np.abs(dc) - (h[:, None, :] + hq), 0.0)  # per-axis gaps (0 if overlapping)
+    dist = np.maximum(np.hypot(ax[..., 0], ax[..., 1]), _MIN_GAP_M)
+    return dist, np.sign(dc) * ax / dist[..., None]
+
+
+def _footprint_terms(moving, others, half, bpts, rows, threshold_m, boundary_weight):
+    """:func:`local_terms` of the footprint variant: eqs. 2-3 on footprint distances."""
+    dist, grad = _rect_distances(moving, half[rows], others, half[None])
+    dist[np.arange(len(rows)), rows] = np.inf  # a skid does not repel itself
+    inv = 1.0 / dist
+    pair = inv.sum(axis=1)
+    # -grad (1/d) = grad(d) / d^2.
+    force = ((inv * inv)[..., None] * grad).sum(axis=1)
+    boundary = np.zeros(len(rows))
+    if len(bpts):
+        bdist, bgrad = _rect_distances(moving, half[rows], bpts, np.zeros(2))
+        near = bdist < threshold_m
+        binv = np.where(near, 1.0 / bdist, 0.0)
+        boundary = boundary_weight * np.where(near, binv - 1.0 / threshold_m, 0.0).sum(axis=1)
+        force = force + boundary_weight * ((binv * binv)[..., None] * bgrad).sum(axis=1)
     return pair, boundary, force
 
 
@@ -280,8 +335,8 @@ def spread(
     centres
         ``(N, 2)`` valid starting centres (the stacking layout).
     variant
-        ``"centroid"``, ``"vertex"``, or ``"auto"``: centroid for one footprint size,
-        vertex for mixed sizes.
+        ``"centroid"``, ``"vertex"``, ``"footprint"``, or ``"auto"`` (footprint: see the
+        module docstring for why it is the default).
     max_iterations
         Iteration cap of each descent.
     energy_rtol
@@ -300,7 +355,7 @@ def spread(
         ``energy_initial``, ``energy_final``, ``converged``, ``notices``.
     """
     if variant == "auto":
-        variant = "centroid" if skids.uniform else "vertex"
+        variant = DEFAULT_VARIANT
     if variant not in VARIANTS:
         raise ValueError(f"potential variant must be one of {VARIANTS} or 'auto' (got {variant!r})")
     half = skids.half
