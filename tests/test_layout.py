@@ -402,6 +402,54 @@ def test_potential_energy_terms_by_hand():
     np.testing.assert_allclose(force[0], [-3 / 125, -4 / 125 + 1.0])
 
 
+def test_potential_footprint_terms_match_a_dense_reference():
+    """The footprint field looks boundary points up in a KD-tree: same values as all pairs."""
+    from swarmpark.layout.potential import local_terms
+
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(0, 10, (12, 2))
+    half = rng.uniform(0.2, 0.8, (12, 2))
+    bpts = rng.uniform(-1, 11, (300, 2))
+    thr, w = 1.5, 0.3
+    pair, bnd, force = local_terms(
+        centres, centres, half, bpts, variant="footprint", threshold_m=thr, boundary_weight=w
+    )
+
+    def gap(dc, reach):
+        ax = np.maximum(np.abs(dc) - reach, 0.0)
+        d = max(float(np.hypot(*ax)), 1e-3)
+        return d, np.sign(dc) * ax / d
+
+    for i in range(12):
+        e_pair, e_bnd, f = 0.0, 0.0, np.zeros(2)
+        for j in range(12):
+            if j != i:
+                d, g = gap(centres[i] - centres[j], half[i] + half[j])
+                e_pair, f = e_pair + 1 / d, f + g / d**2
+        for b in bpts:
+            d, g = gap(centres[i] - b, half[i])
+            if d < thr:
+                e_bnd, f = e_bnd + w * (1 / d - 1 / thr), f + w * g / d**2
+        assert pair[i] == pytest.approx(e_pair, rel=1e-9)
+        assert bnd[i] == pytest.approx(e_bnd, rel=1e-9, abs=1e-12)
+        np.testing.assert_allclose(force[i], f, rtol=1e-9, atol=1e-12)
+    # Rows only: the same values for the skids asked about.
+    rows = np.array([4, 7])
+    p2, b2, f2 = local_terms(
+        centres[rows],
+        centres,
+        half,
+        bpts,
+        variant="footprint",
+        threshold_m=thr,
+        boundary_weight=w,
+        rows=rows,
+    )
+    np.testing.assert_allclose(p2, pair[rows])
+    np.testing.assert_allclose(b2, bnd[rows])
+    np.testing.assert_allclose(f2, force[rows])
+
+
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     boundary=star_polygons(),

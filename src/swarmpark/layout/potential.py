@@ -21,9 +21,10 @@ half again as long as it is wide, so it spaces centres, not skids. For 9 skids o
 m in an 8 x 6 m box its lowest minimum found is a 4-2-3 arrangement with four skids end to
 end along the long side (closest pair 0.54 m; eq. 1 is 12.2 there against 12.8 for the 3 x 3
 grid, so no better search would fix it). The paper's vertex field sees the shape and settles
-in the 3 x 3 grid (0.86 m) but costs 16 times the pairs (10 s for 100 skids against 2 s).
-The footprint field also settles in the 3 x 3 grid (0.82 m; convex max-min: 0.90 m) at the
-centroid field's cost, and handles mixed sizes. Near capacity (24 skids in the L-bay of
+in the 3 x 3 grid (0.86 m) but costs 16 times the pairs (10 s for 100 skids against 2 s,
+measured under load). The footprint field also settles in the 3 x 3 grid (0.82 m; convex
+max-min: 0.90 m) and handles mixed sizes; with the boundary points looked up in a KD-tree it
+takes 0.4-0.8 s for 50-100 skids (``swarmpark bench --only layout``). Near capacity (24 skids in the L-bay of
 docs/layout.md: footprint 0.43 m, centroid and vertex 0.30 m; 9 in an 8 x 8 m diamond: all
 0.30 m) the closest pair can stay at the margin: eq. 1 lowers the sum of ``1/d``, not the
 smallest gap, and a pair pressed together by the walls is a constrained minimum of it. Every
@@ -46,8 +47,11 @@ Departures from the paper, for a layout that is always valid and a loop that ter
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 
 from swarmpark.layout.region import Region, Skids, rect_gaps
 
@@ -157,21 +161,19 @@ def local_terms(
     return pair, boundary, force
 
 
-def _rect_distances(
-    c: np.ndarray, h: np.ndarray, q: np.ndarray, hq: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Distances ``(R, M)`` between axis-aligned rectangles (centres ``c`` ``(R, 2)``, half
-    sizes ``h`` ``(R, 2)``) and rectangles ``q`` with half sizes ``hq`` (broadcast to
-    ``(R, M, 2)``; zero for points), and their gradients ``(R, M, 2)`` with respect to ``c``."""
-    dc = c[:, None, :] - q[None, :, :]
-    ax = np.maximum(np.abs(dc) - (h[:, None, :] + hq), 0.0)  # per-axis gaps (0 if overlapping)
+def _rect_gap(dc: np.ndarray, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance between axis-aligned rectangles whose centres differ by ``dc`` (``(..., 2)``)
+    and whose half sizes add up to ``reach`` (broadcast), and its gradient with respect to the
+    first centre (``(..., 2)``)."""
+    ax = np.maximum(np.abs(dc) - reach, 0.0)  # per-axis gaps (0 if overlapping)
     dist = np.maximum(np.hypot(ax[..., 0], ax[..., 1]), _MIN_GAP_M)
     return dist, np.sign(dc) * ax / dist[..., None]
 
 
 def _footprint_terms(moving, others, half, bpts, rows, threshold_m, boundary_weight):
     """:func:`local_terms` of the footprint variant: eqs. 2-3 on footprint distances."""
-    dist, grad = _rect_distances(moving, half[rows], others, half[None])
+    dc = moving[:, None, :] - others[None, :, :]
+    dist, grad = _rect_gap(dc, half[rows][:, None, :] + half[None, :, :])
     dist[np.arange(len(rows)), rows] = np.inf  # a skid does not repel itself
     inv = 1.0 / dist
     pair = inv.sum(axis=1)
@@ -179,11 +181,25 @@ def _footprint_terms(moving, others, half, bpts, rows, threshold_m, boundary_wei
     force = ((inv * inv)[..., None] * grad).sum(axis=1)
     boundary = np.zeros(len(rows))
     if len(bpts):
-        bdist, bgrad = _rect_distances(moving, half[rows], bpts, np.zeros(2))
-        near = bdist < threshold_m
-        binv = np.where(near, 1.0 / bdist, 0.0)
-        boundary = boundary_weight * np.where(near, binv - 1.0 / threshold_m, 0.0).sum(axis=1)
-        force = force + boundary_weight * ((binv * binv)[..., None] * bgrad).sum(axis=1)
+        # Only boundary points within the threshold of a footprint act: those within the
+        # threshold plus the half diagonal of its centre (a KD-tree finds them; the dense
+        # skids x points arrays were most of the layout's time).
+        reach = threshold_m + float(np.hypot(*half[rows].max(axis=0)))
+        hits = cKDTree(bpts).query_ball_point(moving, reach)
+        lens = np.fromiter((len(h) for h in hits), int, len(hits))
+        if lens.sum():
+            row = np.repeat(np.arange(len(rows)), lens)
+            pts = bpts[np.fromiter(itertools.chain.from_iterable(hits), int, lens.sum())]
+            # A boundary point is a rectangle of no size.
+            bdist, bgrad = _rect_gap(moving[row] - pts, half[rows][row])
+            near = bdist < threshold_m
+            binv = np.where(near, 1.0 / bdist, 0.0)
+            energy = boundary_weight * np.where(near, binv - 1.0 / threshold_m, 0.0)
+            boundary = np.bincount(row, energy, len(rows))
+            f = boundary_weight * (binv * binv)[:, None] * bgrad
+            force = force + np.column_stack(
+                [np.bincount(row, f[:, 0], len(rows)), np.bincount(row, f[:, 1], len(rows))]
+            )
     return pair, boundary, force
 
 
