@@ -307,20 +307,67 @@ def test_potential_spreads_the_stacking_goals():
     np.testing.assert_allclose(nearest_gaps(st, SKID), 0.3, atol=1e-9)
     assert nearest_gaps(pf, SKID).mean() > 0.35
     rep = pf.report
-    assert rep["variant"] == "centroid" and rep["converged"]
+    assert rep["variant"] == "footprint" and rep["converged"]
     assert rep["energy_final"] < rep["energy_initial"]
     assert 0 < rep["iterations"] <= 300
     # The spread reaches the far side of the room, which stacking leaves empty.
     assert pf.poses[:, 0].max() > 10.0 > st.poses[:, 0].max()
 
 
-def test_potential_vertex_variant_for_mixed_sizes():
+def test_potential_footprint_variant_for_mixed_sizes():
     fps = [Footprint(1.2, 0.8), Footprint(2.0, 1.0), Footprint(0.8, 0.6)] * 4
     room = [[0, 0], [12, 0], [12, 9], [0, 9]]
     res = layout(room, fps, method="potential")
-    assert res.report["variant"] == "vertex"
+    assert res.report["variant"] == "footprint"
     assert res.report["energy_final"] < res.report["energy_initial"]
     independent_check(res, fps, room, 0.3)
+    assert check_layout(res.poses, fps, Polygon(room), margin_m=0.3).ok
+
+
+def test_potential_spreads_nine_skids_to_fill_the_box():
+    """Issue 21: 9 skids of 1.2 x 0.8 m in 8 x 6 m. Stacking packs them at the margin (0.30
+    m); the paper's centroid field stops in a 4-2-3 arrangement (0.54 m); the footprint field
+    fills the box as a 3 x 3 grid, near convex's max-min spacing (0.90 m)."""
+    from swarmpark.layout import potential
+    from swarmpark.layout.methods import stack_best
+    from swarmpark.layout.region import make_region, make_skids, rect_gaps
+
+    box8x6 = [[0, 0], [8, 0], [8, 6], [0, 6]]
+    fps = [Footprint(1.2, 0.8)] * 9
+    st = layout(box8x6, fps, method="stacking")
+    pf = layout(box8x6, fps, method="potential")
+    assert st.report["min_spacing_m"] == pytest.approx(0.3)
+    assert pf.report["min_spacing_m"] >= 0.8
+    assert pf.report["min_boundary_clearance_m"] >= 0.8
+    for res in (st, pf):
+        assert check_layout(res.poses, fps, Polygon(box8x6), margin_m=0.3).ok
+        independent_check(res, fps, box8x6, 0.3)
+    # Three columns of three: the grid the box's shape calls for.
+    assert sorted(np.bincount(np.digitize(pf.poses[:, 0], [8 / 3, 16 / 3]))) == [3, 3, 3]
+    # The paper's own centroid variant, from the same start, spreads less (the gap to close).
+    region = make_region(box8x6, None, 0.0, 0.3)
+    skids = make_skids(fps)
+    start = stack_best(region, skids, 9).centres
+    centroid, _ = potential.spread(region, skids, start, variant="centroid")
+    assert rect_gaps(centroid, skids.half).min() < 0.7
+
+
+def test_potential_footprint_terms_by_hand():
+    from swarmpark.layout.potential import local_terms
+
+    # Two 1 x 1 squares 3 m apart along x (gap 2 m), a boundary point 0.5 m below the first.
+    centres = np.array([[0.0, 0.0], [3.0, 0.0]])
+    half = np.full((2, 2), 0.5)
+    bpts = np.array([[0.0, -1.0]])
+    pair, bnd, force = local_terms(
+        centres, centres, half, bpts, variant="footprint", threshold_m=1.0, boundary_weight=2.0
+    )
+    np.testing.assert_allclose(pair, [0.5, 0.5])  # 1 / gap
+    # Point 0.5 m from the first square (2 * (1/0.5 - 1/1)); beyond the threshold of the other.
+    np.testing.assert_allclose(bnd, [2.0, 0.0])
+    # Force on the first: away from the second, 1/2^2, plus 2 * 1/0.5^2 up from the point.
+    np.testing.assert_allclose(force[0], [-0.25, 8.0])
+    np.testing.assert_allclose(force[1], [0.25, 0.0])
 
 
 def test_potential_iteration_cap_is_reported():
@@ -353,6 +400,54 @@ def test_potential_energy_terms_by_hand():
     assert total_energy(pair, bnd) == pytest.approx(0.2 + 0.5)
     # Force on goal 0: away from goal 1, (-3, -4) / 125, plus (0, 1) / 1 from the point.
     np.testing.assert_allclose(force[0], [-3 / 125, -4 / 125 + 1.0])
+
+
+def test_potential_footprint_terms_match_a_dense_reference():
+    """The footprint field looks boundary points up in a KD-tree: same values as all pairs."""
+    from swarmpark.layout.potential import local_terms
+
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(0, 10, (12, 2))
+    half = rng.uniform(0.2, 0.8, (12, 2))
+    bpts = rng.uniform(-1, 11, (300, 2))
+    thr, w = 1.5, 0.3
+    pair, bnd, force = local_terms(
+        centres, centres, half, bpts, variant="footprint", threshold_m=thr, boundary_weight=w
+    )
+
+    def gap(dc, reach):
+        ax = np.maximum(np.abs(dc) - reach, 0.0)
+        d = max(float(np.hypot(*ax)), 1e-3)
+        return d, np.sign(dc) * ax / d
+
+    for i in range(12):
+        e_pair, e_bnd, f = 0.0, 0.0, np.zeros(2)
+        for j in range(12):
+            if j != i:
+                d, g = gap(centres[i] - centres[j], half[i] + half[j])
+                e_pair, f = e_pair + 1 / d, f + g / d**2
+        for b in bpts:
+            d, g = gap(centres[i] - b, half[i])
+            if d < thr:
+                e_bnd, f = e_bnd + w * (1 / d - 1 / thr), f + w * g / d**2
+        assert pair[i] == pytest.approx(e_pair, rel=1e-9)
+        assert bnd[i] == pytest.approx(e_bnd, rel=1e-9, abs=1e-12)
+        np.testing.assert_allclose(force[i], f, rtol=1e-9, atol=1e-12)
+    # Rows only: the same values for the skids asked about.
+    rows = np.array([4, 7])
+    p2, b2, f2 = local_terms(
+        centres[rows],
+        centres,
+        half,
+        bpts,
+        variant="footprint",
+        threshold_m=thr,
+        boundary_weight=w,
+        rows=rows,
+    )
+    np.testing.assert_allclose(p2, pair[rows])
+    np.testing.assert_allclose(b2, bnd[rows])
+    np.testing.assert_allclose(f2, force[rows])
 
 
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])

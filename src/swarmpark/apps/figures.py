@@ -165,6 +165,21 @@ def _layout_png(img: Path) -> None:
     _draw(str(img / "layout_methods.png"), panels, L_BAY, None, fps)
 
 
+def _centroid_spacing(boundary, fp, count: int) -> float:
+    """Closest pair of the potential layout with the paper's centroid field (eqs. 2-3 on
+    centroid distances), from the same stacking start: the value before issue 21."""
+    from swarmpark.layout import potential
+    from swarmpark.layout.methods import stack_best
+    from swarmpark.layout.region import make_region, make_skids, rect_gaps
+
+    region = make_region(boundary, None, 0.0, 0.3)
+    skids = make_skids([fp] * count)
+    centres, _ = potential.spread(
+        region, skids, stack_best(region, skids, count).centres, variant="centroid"
+    )
+    return float(rect_gaps(centres, skids.half).min())
+
+
 def _layout(img: Path, quick: bool) -> list[FidelityRow]:
     from swarmpark.core.geometry import Footprint
     from swarmpark.layout import LayoutError, capacity, layout
@@ -183,6 +198,11 @@ def _layout(img: Path, quick: bool) -> list[FidelityRow]:
                     cells.append(f"{m} {_fmt(spacing, '.2f')} m")
             except LayoutError as exc:
                 cells.append(f"{m} refused ({str(exc)[:60]})")
+        if count is not None:
+            cells.insert(
+                2,
+                f"potential with the paper's centroid field {_centroid_spacing(boundary, fp, count):.2f} m",
+            )
         if count is None:
             rows.append(
                 FidelityRow(
@@ -199,6 +219,7 @@ def _layout(img: Path, quick: bool) -> list[FidelityRow]:
                     "layout/stacking.py, potential.py, convex.py",
                     "stacking packs; the potential field pushes goals apart to fill the "
                     "boundary; convex maximizes the spacing",
+                    # (potential: distances between footprints, layout/potential.py says why)
                     "closest pair: " + ", ".join(cells),
                 )
             )
@@ -213,7 +234,11 @@ def _assignment(out: Path, quick: bool, compare: bool) -> list[FidelityRow]:
     Fig. 6 and Fig. 7 ones, and the page is not rewritten) and the Fig. 6/7 rows."""
     from swarmpark.apps.compare import compare_costs, markdown_table
 
-    figs = [SCENARIOS / "hallway-fig7.yaml", SCENARIOS / "dead-end-fig6.yaml"]
+    figs = [
+        SCENARIOS / "hallway-fig7.yaml",
+        SCENARIOS / "hallway-side-room-fig7.yaml",
+        SCENARIOS / "dead-end-fig6.yaml",
+    ]
     if quick:
         rows = compare_costs(
             figs,
@@ -250,6 +275,16 @@ def _assignment(out: Path, quick: bool, compare: bool) -> list[FidelityRow]:
             "; ".join(cell("hallway-fig7", c) for c in ("euclidean", "formation")),
         ),
         FidelityRow(
+            "Hing 2018 Fig. 7, Euclidean wrong rather than tied: hallway, the second skid "
+            "starts in a room behind a wall",
+            "assign.py, scenarios/hallway-side-room-fig7.yaml",
+            "the Euclidean assignment lets a parked skid block the hallway; the formation "
+            "cost does not",
+            "; ".join(
+                cell("hallway-side-room-fig7", c) for c in ("euclidean", "formation", "path")
+            ),
+        ),
+        FidelityRow(
             "Hing 2018 Fig. 6: dead-end bay, a parked skid blocks the rest",
             "assign/, supervisor fill order (layout fill_order)",
             "sequential assignment blocks; formation cost + deepest first parks all",
@@ -258,7 +293,7 @@ def _assignment(out: Path, quick: bool, compare: bool) -> list[FidelityRow]:
     ]
 
 
-def _rvo(img: Path, quick: bool) -> list[FidelityRow]:
+def _navigation(img: Path, quick: bool) -> list[FidelityRow]:
     from swarmpark.apps.plot import plot_run
 
     rows = []
@@ -290,6 +325,20 @@ def _rvo(img: Path, quick: bool) -> list[FidelityRow]:
             "control/orca/, control/nav/",
             "the parked skids make room and return",
             _outcome(r),
+        )
+    )
+    planned = _run("u-trap-2015", quick).result
+    pure = _run("experimental/u-trap-2015-pure-pf", quick).result
+    x, y, _ = pure["robots"]["r1"]["final_pose"]
+    rows.append(
+        FidelityRow(
+            "Hing 2015 Sect. 4 / 2018 Sect. 3.4: pure potential field (no planner) stops in a "
+            "local minimum; planning first overcomes it",
+            "control/nav/pure_pf.py (navigation.mode: pure-pf), control/nav/navigator.py",
+            "pure field: some skids stay in local minima; planner + field: parks",
+            f"U-shaped crate (u-trap-2015): pure-pf {_outcome(pure)}, stopped at "
+            f"({x:.1f}, {y:.1f}) m, {pure['robots']['r1']['final_position_error_m']:.1f} m "
+            f"from its goal; planner + field {_outcome(planned)}",
         )
     )
     out = _run("hangar-park", quick)
@@ -361,7 +410,7 @@ def run_figures(
     for name, step in (
         ("layout", lambda: _layout(img, quick)),
         ("assignment", lambda: _assignment(out, quick, compare)),
-        ("rvo", lambda: _rvo(img, quick)),
+        ("navigation", lambda: _navigation(img, quick)),
         ("formation", lambda: _formation(img, quick)),
         ("sensing", lambda: sensing(img, quick, _scenario)),
     ):

@@ -53,7 +53,8 @@ class Supervisor(CommandsMixin):
     world
         The scenario's world (map, obstacles the operator knows, commands, sensing options).
     controller
-        The navigation stack (default: :class:`~swarmpark.control.nav.navigator.Navigator`).
+        The navigation stack (default: the scenario's ``navigation.mode``, see
+        :func:`~swarmpark.control.nav.stack.make_controller`).
     link
         The robots: a :class:`~swarmpark.links.base.RobotLink`; ``None`` builds a
         :class:`~swarmpark.sim.link.SimLink` of ``world``; a bare
@@ -69,10 +70,7 @@ class Supervisor(CommandsMixin):
         link: RobotLink | Simulator | None = None,
         health: HealthParams | None = None,
     ) -> None:
-        from swarmpark.control.nav.navigator import (  # the default navigation stack
-            Navigator,
-            NavParams,
-        )
+        from swarmpark.control.nav.stack import make_controller
 
         self.world = world
         if link is None:
@@ -91,7 +89,9 @@ class Supervisor(CommandsMixin):
         self.controller = (
             controller
             if controller is not None
-            else Navigator(NavParams(avoidance=world.scenario.navigation.avoidance))
+            else make_controller(
+                world.scenario.navigation.mode, world.scenario.navigation.avoidance
+            )
         )
         n = self.n = self.info.n
         self.ids = list(self.info.ids)

@@ -21,7 +21,7 @@ from pydantic import (
 )
 
 from swarmpark.assign import ASSIGNMENT_COSTS as _COSTS
-from swarmpark.control.modes import AVOIDANCE_MODES
+from swarmpark.control.modes import AVOIDANCE_MODES, NAVIGATION_MODES
 from swarmpark.core.geometry import (
     Footprint,
     GeometryError,
@@ -282,10 +282,23 @@ class ExpectSpec(_Model):
 
 
 class NavigationSpec(_Model):
-    """Navigation options: ``avoidance`` between skids is ``monitor`` (collision monitor with
-    right of way at bottlenecks, the default) or ``rvo`` (ORCA with priorities)."""
+    """Navigation options: ``mode`` is ``planner`` (plan a path, follow it with the potential
+    field, the default) or ``pure-pf`` (the 2015 paper's potential field straight to the goal,
+    no planner: the baseline with local minima); ``avoidance`` between skids is ``monitor``
+    (collision monitor with right of way at bottlenecks, the default) or ``rvo`` (ORCA with
+    priorities, ``planner`` mode only)."""
 
+    mode: Annotated[str, NAVIGATION_MODES.as_field()] = "planner"
     avoidance: Annotated[str, AVOIDANCE_MODES.as_field()] = "monitor"
+
+    @model_validator(mode="after")
+    def _avoidance_of_mode(self) -> NavigationSpec:
+        if self.mode == "pure-pf" and self.avoidance != "monitor":
+            raise ValueError(
+                f"avoidance {self.avoidance!r} needs mode 'planner' (pure-pf: skids repel "
+                "each other in the field, with the collision monitor as the safety layer)"
+            )
+        return self
 
 
 class KidnapSpec(_Model):
