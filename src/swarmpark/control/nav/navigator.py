@@ -25,6 +25,7 @@ from swarmpark.control.base import ControlView
 from swarmpark.control.nav.avoidance import AvoidanceInput, OrcaAdapter
 from swarmpark.control.nav.docking import Docking, DockState
 from swarmpark.control.nav.field import PotentialField
+from swarmpark.control.nav.fleetmap import FleetState
 from swarmpark.control.nav.follower import PathFollower, PathState
 from swarmpark.control.nav.hold import hold_outside
 from swarmpark.control.nav.make_room import MakeRoom, RoomState
@@ -76,7 +77,10 @@ class Navigator:
         self.scene = Scene(p.apf.outline_step_m, p.monitor.margin_m)
         self.follower = PathFollower(p.follower)
         self.planner = Planner(
-            p.planner, staging_m=p.docking.runup_m, direct_within_m=p.docking.manoeuvre_radius_m
+            p.planner,
+            staging_m=p.docking.runup_m,
+            direct_within_m=p.docking.manoeuvre_radius_m,
+            fleet_params=p.fleet_map,
         )
         self.field = PotentialField(p.apf, dynamic=p.avoidance != "rvo")
         self.docking = Docking(p.docking, BackUp(p.backup, stall_s=stall_s), stall_s=stall_s)
@@ -120,7 +124,7 @@ class Navigator:
             return cmd
         scene = self.scene.update(view)
         paths = self._states("path")
-        self.planner.update(view, paths, self.follower)
+        self.planner.update(view, paths, self.follower, self._fleet(view))
         targets, final = self.follower.targets(view, idx, paths)
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
         waiting = self.follower.waiting(view, idx, paths)
@@ -157,6 +161,15 @@ class Navigator:
             p.stall, [r.stall for r in robots], cmd[idx], [r.dock.docked for r in robots], view.dt
         )
         return cmd
+
+    def _fleet(self, view: ControlView) -> FleetState:
+        """The fleet as the planner sees it (:class:`~.fleetmap.FleetState`)."""
+        settled = np.array([r.dock.settled for r in self.robots], dtype=bool)
+        stopped = np.zeros(len(settled), bool) if view.stopped is None else view.stopped
+        parked = settled | ~view.active | stopped
+        held = np.array([r.stall.stalled_s for r in self.robots]) >= self.params.fleet_map.still_s
+        bound = view.active & ~settled
+        return FleetState(parked=parked, bound=bound, still=bound & held)
 
     def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
         """Commands ``raw`` of skids ``idx`` not driven by this controller (teleop), scaled

@@ -22,6 +22,7 @@ __all__ = [
     "DeadlockParams",
     "DockingParams",
     "FieldParams",
+    "FleetMapParams",
     "FollowerParams",
     "GiveWayParams",
     "HoldParams",
@@ -107,6 +108,28 @@ class PlannerParams:
         _check(self, {"staging_check_points": "int>0"})
         if self.plan_resolution_m is not None:
             _check(self, {"plan_resolution_m": ">0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class FleetMapParams:
+    """The fleet layers of each plan and the plan repairs (:mod:`.fleetmap`)."""
+
+    #: Extra cost per metre inside another skid's goal spot while that skid is on its way
+    #: (a path crossing a 1.2 m spot costs as much as this many times 1.2 m more of floor).
+    spot_cost: float = 6.0
+    #: Cost band around a parked skid (beyond the lethal part): width and extra cost per metre.
+    band_m: float = 0.3
+    band_cost: float = 2.0
+    #: A skid that has not shortened its remaining path by ``stuck_progress_m`` for this long
+    #: is planned again, with the skids standing still around it as obstacles.
+    stuck_s: float = 6.0
+    stuck_progress_m: float = 0.3
+    #: A skid held still this long (its stall watch) counts as standing still for a repair.
+    still_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        _check(self, {"spot_cost": ">=0", "band_m": ">=0", "band_cost": ">=0"})
+        _check(self, {"stuck_s": ">0", "stuck_progress_m": ">0", "still_s": ">=0"})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -368,6 +391,7 @@ class NavParams:
     avoidance: str = "monitor"
     follower: FollowerParams = field(default_factory=FollowerParams)
     planner: PlannerParams = field(default_factory=PlannerParams)
+    fleet_map: FleetMapParams = field(default_factory=FleetMapParams)
     apf: FieldParams = field(default_factory=FieldParams)
     docking: DockingParams = field(default_factory=DockingParams)
     monitor: MonitorParams = field(default_factory=MonitorParams)
