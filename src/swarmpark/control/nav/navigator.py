@@ -29,6 +29,7 @@ from swarmpark.control.nav.fleetmap import FleetState
 from swarmpark.control.nav.follower import PathFollower, PathState
 from swarmpark.control.nav.hold import hold_outside
 from swarmpark.control.nav.make_room import MakeRoom, RoomState
+from swarmpark.control.nav.manoeuvre import ManoeuvrePlanner, ManoeuvreState
 from swarmpark.control.nav.monitor import CollisionMonitor, MonitorResult
 from swarmpark.control.nav.params import NavParams
 from swarmpark.control.nav.planner import Planner
@@ -57,6 +58,7 @@ class RobotNav:
     backup: BackUpState = field(default_factory=BackUpState)
     give_way: GiveWayState = field(default_factory=GiveWayState)
     deadlock: DeadlockState = field(default_factory=DeadlockState)
+    manoeuvre: ManoeuvreState = field(default_factory=ManoeuvreState)
 
 
 class Navigator:
@@ -85,6 +87,7 @@ class Navigator:
         self.field = PotentialField(p.apf, dynamic=p.avoidance != "rvo")
         self.docking = Docking(p.docking, BackUp(p.backup, stall_s=stall_s), stall_s=stall_s)
         self.monitor = CollisionMonitor(p.monitor)
+        self.manoeuvre = ManoeuvrePlanner(p.manoeuvre)
         self.give_way = GiveWay(p.give_way)
         self.make_room = MakeRoom(p.make_room)
         self.ladder = DeadlockLadder(p.deadlock, p.backup, stall_s=stall_s)
@@ -133,27 +136,39 @@ class Navigator:
             view, idx, scene, targets, reverse, final, p.follower.approach_m
         )
         raw[waiting] = 0.0
+        # A skid stuck for a while drives a planned manoeuvre instead (not docked, not held).
+        docked = np.array([self.robots[i].dock.docked for i in idx], dtype=bool)
+        held = np.zeros(len(idx), bool) if view.hold is None else view.hold[idx]
+        man_states = self._states("manoeuvre")
+        man = self.manoeuvre.step(view, idx, raw, man_states, ~docked & ~held & ~waiting)
+        for i in idx[man]:
+            self.robots[i].dock.runup = False  # the docking starts afresh after it
+        mraw = raw[man].copy()
         raw = self.docking.step(
             view,
             idx,
             raw,
-            final & ~waiting,
+            final & ~waiting & ~man,
             self._states("dock"),
             self._states("stall"),
             self._states("backup"),
         )
+        raw[man] = mraw
         if p.avoidance == "rvo":
             full = np.zeros((n, 2))
             full[idx] = raw
-            cruising = ~final & ~waiting
+            cruising = ~final & ~waiting & ~man
             aims, _ = self.follower.targets(view, idx[cruising], paths, p.rvo.lookahead_m)
             full = self._avoid(view, full, idx[cruising], aims)
             moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
             cmd[moving] = self._monitor(view, moving, full[moving], joint=True)
         else:
-            docked = [r.dock.docked for r in self.robots]
-            raw = self.give_way.step(view, idx, raw, dist_goal, self._states("give_way"), docked)
+            raw = self.give_way.step(
+                view, idx, raw, dist_goal, self._states("give_way"), docked.tolist()
+            )
+            raw[man] = mraw
             cmd[idx] = self._monitor(view, idx, raw)
+        self.manoeuvre.observe(view, idx, man_states, raw, cmd[idx])
         hold_outside(view, idx, cmd, p.hold)
         # How long the monitor or the field has kept each skid (nearly) still.
         robots = [self.robots[i] for i in idx]

@@ -27,6 +27,7 @@ __all__ = [
     "GiveWayParams",
     "HoldParams",
     "MakeRoomParams",
+    "ManoeuvreParams",
     "MonitorParams",
     "NavParams",
     "PlannerParams",
@@ -130,6 +131,51 @@ class FleetMapParams:
     def __post_init__(self) -> None:
         _check(self, {"spot_cost": ">=0", "band_m": ">=0", "band_cost": ">=0"})
         _check(self, {"stuck_s": ">0", "stuck_progress_m": ">0", "still_s": ">=0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class ManoeuvreParams:
+    """Manoeuvres for a stuck skid's rectangle (:mod:`.manoeuvre`, :mod:`swarmpark.plan.lattice`)."""
+
+    #: A skid whose remaining distance to its goal (position plus heading at the navigation
+    #: lever) has not fallen by ``progress_m`` for ``stuck_s`` plans a manoeuvre.
+    stuck_s: float = 8.0
+    progress_m: float = 0.15
+    #: The planning window: the box around the skid and its goal grown by this, at most
+    #: ``max_window_m`` on a side (farther goals are left to the path planner's repairs).
+    window_margin_m: float = 2.5
+    max_window_m: float = 14.0
+    #: Other skids are obstacles grown by this; people by ``person_margin_m``; the skid's own
+    #: footprint is grown by ``grow_m`` (besides half a cell diagonal) for collision checks.
+    skid_margin_m: float = 0.05
+    person_margin_m: float = 0.3
+    grow_m: float = 0.02
+    #: Reverse moves cost this much more than forward ones; the search's expansion budget.
+    reverse_cost: float = 1.5
+    budget: int = 400_000
+    #: Dropped when the monitor holds it still this long; tried again after ``retry_s``.
+    blocked_s: float = 3.0
+    retry_s: float = 4.0
+    #: Tracking: share of top speed and yaw rate, gains, and when a segment is done. The
+    #: speed and turn gains (1/s) stay below 1 / the monitor's horizon, so the monitor's
+    #: rollout of a held command ends inside the segment, not past it at a wall.
+    speed_share: float = 0.5
+    k_speed: float = 0.9
+    k_yaw: float = 0.9
+    k_lateral: float = 3.0
+    min_speed_mps: float = 0.05
+    min_yaw_rate_radps: float = 0.1
+    done_m: float = 0.03
+    done_rad: float = float(np.deg2rad(2.0))
+
+    def __post_init__(self) -> None:
+        _check(self, {"stuck_s": ">0", "progress_m": ">0", "window_margin_m": ">0"})
+        _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
+        _check(self, {"grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"})
+        _check(self, {"blocked_s": ">0", "retry_s": ">=0", "speed_share": "share"})
+        _check(self, {"k_speed": ">0", "k_yaw": ">0", "k_lateral": ">0"})
+        _check(self, {"min_speed_mps": ">0", "min_yaw_rate_radps": ">0", "done_m": ">0"})
+        _check(self, {"done_rad": ">0"})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -392,6 +438,7 @@ class NavParams:
     follower: FollowerParams = field(default_factory=FollowerParams)
     planner: PlannerParams = field(default_factory=PlannerParams)
     fleet_map: FleetMapParams = field(default_factory=FleetMapParams)
+    manoeuvre: ManoeuvreParams = field(default_factory=ManoeuvreParams)
     apf: FieldParams = field(default_factory=FieldParams)
     docking: DockingParams = field(default_factory=DockingParams)
     monitor: MonitorParams = field(default_factory=MonitorParams)
