@@ -100,10 +100,11 @@ def rect_mask(fp: Footprint, heading: float, res: float, grow_m: float) -> np.nd
     c, s = np.cos(heading), np.sin(heading)
     along = dx * c + dy * s
     across = -dx * s + dy * c
+    eps = 1e-9  # cell centres on the outline count as inside
     return (
-        (along >= -fp.pivot - grow_m)
-        & (along <= fp.length_m - fp.pivot + grow_m)
-        & (np.abs(across) <= fp.width_m / 2 + grow_m)
+        (along >= -fp.pivot - grow_m - eps)
+        & (along <= fp.length_m - fp.pivot + grow_m + eps)
+        & (np.abs(across) <= fp.width_m / 2 + grow_m + eps)
     )
 
 

@@ -131,6 +131,7 @@ class Supervisor(CommandsMixin):
         self.health.heartbeat(self.t, self.inbox.odom_stamp)
         self._sent = np.zeros((n, 2))
         self.metrics = MetricsRecorder(self.ids, self.truth_poses().copy())
+        self.metrics.explain = self._explain
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
         )
@@ -230,6 +231,20 @@ class Supervisor(CommandsMixin):
             self.link.teleport(i, pose)
             self.metrics.moved_by_hand(i, pose)
             self.kidnapped.append((i, self.t))
+
+    def _explain(self, i: int) -> str:
+        """What holds robot ``i`` up, for a deadlock report: the fill order, a stop, or what
+        the controller says (with robot ids)."""
+        if self.stopped[i] or self.teleop[i] or self.estopped:
+            return "stopped by the operator"
+        held = self.held()
+        if len(held) == self.n and held[i]:
+            return "held outside its boundary by the fill order"
+        explain = getattr(self.controller, "explain", None)
+        if explain is None:
+            return "no progress"
+        reason, others = explain(i)
+        return reason if not others else f"{reason}: {', '.join(self.ids[j] for j in others)}"
 
     def _run_due_commands(self) -> None:
         eps = 1e-9

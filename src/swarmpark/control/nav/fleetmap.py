@@ -105,7 +105,7 @@ def blocking(view: ControlView, i: int, parked: np.ndarray) -> np.ndarray:
     priority (they make room for it)."""
     out = parked.copy()
     out[i] = False
-    return out & (view.priority <= view.priority[i])
+    return out & (view.priority >= view.priority[i])
 
 
 def fleet_costmap(

@@ -211,7 +211,8 @@ class ManoeuvrePlanner:
                 u = np.array([np.cos(b[2]), np.sin(b[2])])
                 along = float(np.dot(b[:2] - pose[:2], u)) * d
                 if along > p.done_m:
-                    lateral = float(np.cross(u, pose[:2] - a[:2]))
+                    rel = pose[:2] - a[:2]
+                    lateral = float(u[0] * rel[1] - u[1] * rel[0])  # left of the run: > 0
                     aim = b[2] - d * np.arctan(p.k_lateral * lateral)
                     err = wrap_angle(aim - pose[2])
                     speed = np.clip(p.k_speed * along, p.min_speed_mps, v_max)

@@ -177,6 +177,27 @@ class Navigator:
         )
         return cmd
 
+    def explain(self, i: int) -> tuple[str, list[int]]:
+        """Why skid ``i`` is not getting anywhere, as far as navigation knows (for deadlock
+        reports): a reason and the skids involved."""
+        if i >= len(self.robots):
+            return "not driven", []
+        r = self.robots[i]
+        if r.path.failed:
+            return "no path to its goal on the known map", []
+        if r.manoeuvre.running():
+            return "manoeuvring towards its goal", []
+        blockers = sorted(r.give_way.blockers)
+        if blockers:
+            return "held by the collision monitor before other skids", blockers
+        if r.stall.stalled_s > 0:
+            if r.manoeuvre.failed:
+                return "held still; no manoeuvre to its goal found around the skids standing", []
+            return "held still by the collision monitor (walls, obstacles or people)", []
+        if self.making_room is not None and i < len(self.making_room) and self.making_room[i]:
+            return "making room for another skid", []
+        return "moving without progress (a local minimum of the potential field)", []
+
     def _fleet(self, view: ControlView) -> FleetState:
         """The fleet as the planner sees it (:class:`~.fleetmap.FleetState`)."""
         settled = np.array([r.dock.settled for r in self.robots], dtype=bool)

@@ -1,0 +1,86 @@
+"""The fleet layers of each plan and the plan repairs (:mod:`swarmpark.control.nav.fleetmap`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from navkit import FOOTPRINT, make_view
+
+from swarmpark.control.nav.fleetmap import FleetState, fleet_costmap, points_in_rects
+from swarmpark.control.nav.follower import PathFollower, PathState
+from swarmpark.control.nav.params import FleetMapParams, FollowerParams, PlannerParams
+from swarmpark.control.nav.planner import Planner
+
+P = FleetMapParams()
+
+
+def _planner():
+    return Planner(PlannerParams(), staging_m=0.9, direct_within_m=1.8, fleet_params=P)
+
+
+def _crosses(path, pose, grow=0.0):
+    pts = np.vstack([np.linspace(a, b, 20) for a, b in zip(path[:-1], path[1:], strict=True)])
+    return points_in_rects(pts, np.atleast_2d(pose), [FOOTPRINT], grow).any()
+
+
+def test_parked_skids_are_lethal_and_goal_spots_cost_extra():
+    poses = [[1.0, 3.0, 0.0], [5.0, 3.0, np.pi / 2], [7.0, 1.5, 0.0]]
+    goals = [[9.0, 3.0, 0.0], [5.0, 3.0, np.pi / 2], [5.0, 4.6, 0.0]]
+    view = make_view(poses, goals)
+    pl = _planner()
+    cm = pl.costmap(view, FOOTPRINT)
+    parked = np.array([False, True, False])
+    bound = ~parked
+    fcm = fleet_costmap(cm, view, 0, parked, bound, P)
+    rc = cm.grid.world_to_cell(np.array([[5.0, 3.0], [5.0, 4.6], [1.0, 3.0]]))
+    assert np.isinf(fcm.cost[rc[0, 0], rc[0, 1]])  # on the parked skid
+    assert fcm.cost[rc[1, 0], rc[1, 1]] >= cm.cost[rc[1, 0], rc[1, 1]] + P.spot_cost  # g2's spot
+    assert fcm.cost[rc[2, 0], rc[2, 1]] == cm.cost[rc[2, 0], rc[2, 1]]  # its own place
+    # A skid of higher priority is not stopped by the parked one (the block makes room).
+    view_hi = make_view(poses, goals, priority=[5, 1, 1])
+    fcm_hi = fleet_costmap(cm, view_hi, 0, parked, bound, P)
+    assert np.isfinite(fcm_hi.cost[rc[0, 0], rc[0, 1]])
+
+
+def test_plan_goes_around_a_parked_skid_and_is_repaired_when_one_parks_on_it():
+    poses = [[1.0, 3.0, 0.0], [5.0, 1.0, np.pi / 2]]
+    goals = [[9.0, 3.0, 0.0], [5.0, 3.0, np.pi / 2]]
+    states = [PathState(), PathState()]
+    fol = PathFollower(FollowerParams())
+    pl = _planner()
+    view = make_view(poses, goals, goal_changed=[True, True])
+    moving = FleetState(parked=np.zeros(2, bool), bound=np.ones(2, bool), still=np.zeros(2, bool))
+    pl.update(view, states, fol, moving)
+    first = states[0].path
+    # The straight line runs through skid 1's goal spot; the plan goes around it.
+    assert not _crosses(first, goals[1], grow=0.0)
+    # Skid 1 parks across the hall where skid 0's path runs: skid 0 is planned again.
+    blocker = [3.0, 3.0, np.pi / 2]
+    blocker = [float(first[1][0]) if len(first) > 2 else 3.0, float(first[1][1]), np.pi / 2]
+    view = make_view([poses[0], blocker], [goals[0], blocker])
+    parked = FleetState(
+        parked=np.array([False, True]), bound=np.array([True, False]), still=np.zeros(2, bool)
+    )
+    pl.update(view, states, fol, parked)
+    assert states[0].path is not first
+    assert not _crosses(states[0].path, blocker, grow=0.3)
+
+
+def test_stuck_skid_is_planned_again_with_the_still_skids_as_obstacles():
+    poses = [[1.0, 3.0, 0.0], [4.0, 3.0, np.pi / 2]]
+    goals = [[9.0, 3.0, 0.0], [4.0, 1.0, np.pi / 2]]
+    states = [PathState(), PathState()]
+    fol = PathFollower(FollowerParams())
+    pl = _planner()
+    fleet = FleetState(
+        parked=np.zeros(2, bool), bound=np.ones(2, bool), still=np.array([False, True])
+    )
+    view = make_view(poses, goals, goal_changed=[True, True])
+    pl.update(view, states, fol, fleet)
+    first = states[0].path
+    assert _crosses(first, poses[1], grow=0.3)  # skid 1 is on its way: not an obstacle
+    t = 0.0
+    while states[0].path is first and t < 2 * P.stuck_s:
+        t += 0.5
+        pl.update(make_view(poses, goals, t=t), states, fol, fleet)
+    assert P.stuck_s <= t < P.stuck_s + 1.0
+    assert not _crosses(states[0].path, poses[1], grow=0.3)
