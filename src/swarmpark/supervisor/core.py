@@ -356,9 +356,10 @@ class Supervisor(CommandsMixin):
             self._sense()
         # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
         paused = self.stopped | self.teleop | self.estopped | view.hold | self.health.faulted
-        aside = getattr(self.controller, "making_room", None)  # standing aside (RVO)
-        if aside is not None and len(aside) == self.n:
-            paused = paused | aside
+        for name in ("making_room", "queued"):  # standing aside (RVO), queued at a door
+            aside = getattr(self.controller, name, None)
+            if aside is not None and len(aside) == self.n:
+                paused = paused | aside
         self.metrics.on_step(self.t, self.truth_poses(), self.goals, self.has_goal, paused, step)
         return step
 

@@ -43,6 +43,7 @@ from swarmpark.control.nav.recovery import (
     StallWatch,
 )
 from swarmpark.control.nav.scene import Scene
+from swarmpark.control.nav.traffic import TrafficControl, TrafficState
 
 __all__ = ["NavParams", "Navigator", "RobotNav"]
 
@@ -59,6 +60,7 @@ class RobotNav:
     give_way: GiveWayState = field(default_factory=GiveWayState)
     deadlock: DeadlockState = field(default_factory=DeadlockState)
     manoeuvre: ManoeuvreState = field(default_factory=ManoeuvreState)
+    traffic: TrafficState = field(default_factory=TrafficState)
 
 
 class Navigator:
@@ -88,6 +90,7 @@ class Navigator:
         self.docking = Docking(p.docking, BackUp(p.backup, stall_s=stall_s), stall_s=stall_s)
         self.monitor = CollisionMonitor(p.monitor)
         self.manoeuvre = ManoeuvrePlanner(p.manoeuvre)
+        self.traffic = TrafficControl(p.traffic)
         self.give_way = GiveWay(p.give_way)
         self.make_room = MakeRoom(p.make_room)
         self.ladder = DeadlockLadder(p.deadlock, p.backup, stall_s=stall_s)
@@ -100,6 +103,8 @@ class Navigator:
         self.robots: list[RobotNav] = []
         #: (N,) skids standing aside for another on purpose this tick (RVO; not deadlocked).
         self.making_room = np.zeros(0, dtype=bool)
+        #: (N,) skids waiting for a bottleneck this tick (queued on purpose; not deadlocked).
+        self.queued = np.zeros(0, dtype=bool)
 
     @property
     def recoveries(self) -> list[dict]:
@@ -127,7 +132,8 @@ class Navigator:
             return cmd
         scene = self.scene.update(view)
         paths = self._states("path")
-        self.planner.update(view, paths, self.follower, self._fleet(view))
+        fleet = self._fleet(view)
+        self.planner.update(view, paths, self.follower, fleet)
         targets, final = self.follower.targets(view, idx, paths)
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
         waiting = self.follower.waiting(view, idx, paths)
@@ -140,7 +146,9 @@ class Navigator:
         docked = np.array([self.robots[i].dock.docked for i in idx], dtype=bool)
         held = np.zeros(len(idx), bool) if view.hold is None else view.hold[idx]
         man_states = self._states("manoeuvre")
-        man = self.manoeuvre.step(view, idx, raw, man_states, ~docked & ~held & ~waiting)
+        queued = np.array([self.robots[i].traffic.waiting > 0 for i in idx], dtype=bool)
+        eligible = ~docked & ~held & ~waiting & ~queued
+        man = self.manoeuvre.step(view, idx, raw, man_states, eligible)
         for i in idx[man]:
             self.robots[i].dock.runup = False  # the docking starts afresh after it
         mraw = raw[man].copy()
@@ -170,6 +178,11 @@ class Navigator:
             cmd[idx] = self._monitor(view, idx, raw)
         self.manoeuvre.observe(view, idx, man_states, raw, cmd[idx])
         hold_outside(view, idx, cmd, p.hold)
+        self.queued = np.zeros(n, dtype=bool)
+        if p.traffic.enabled:
+            self.queued[idx] = self.traffic.step(
+                view, idx, cmd, paths, self.follower, self._states("traffic"), fleet.parked
+            )
         # How long the monitor or the field has kept each skid (nearly) still.
         robots = [self.robots[i] for i in idx]
         StallWatch.update_all(

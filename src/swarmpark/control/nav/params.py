@@ -32,6 +32,7 @@ __all__ = [
     "NavParams",
     "PlannerParams",
     "StallParams",
+    "TrafficParams",
 ]
 
 
@@ -176,6 +177,35 @@ class ManoeuvreParams:
         _check(self, {"k_speed": ">0", "k_yaw": ">0", "k_lateral": ">0"})
         _check(self, {"min_speed_mps": ">0", "min_yaw_rate_radps": ">0", "done_m": ">0"})
         _check(self, {"done_rad": ">0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrafficParams:
+    """Queues at the bottlenecks (:mod:`.traffic`, :mod:`swarmpark.plan.bottlenecks`)."""
+
+    #: Off: no zones, no queues.
+    enabled: bool = True
+    #: A lane is two of the widest skids side by side plus this; narrower passages are zones.
+    lane_clearance_m: float = 1.2
+    #: Zones reach half the longest skid plus this beyond the passage.
+    pad_m: float = 0.3
+    #: Bottlenecks are found on the map coarsened to this resolution.
+    resolution_m: float = 0.1
+    #: A skid asks for a zone its path enters within this distance.
+    lookahead_m: float = 4.0
+    #: Skids from the same side follow each other into a zone this long apart.
+    convoy_gap_s: float = 2.0
+    #: A skid without a grant stops this far short of the zone (its command checked this
+    #: far ahead in time).
+    gap_m: float = 0.3
+    check_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(self, {"lane_clearance_m": ">=0", "pad_m": ">=0", "resolution_m": ">0"})
+        _check(self, {"lookahead_m": ">0", "convoy_gap_s": ">=0", "gap_m": ">=0"})
+        _check(self, {"check_s": ">0"})
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"TrafficParams.enabled must be true or false (got {self.enabled!r})")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -439,6 +469,7 @@ class NavParams:
     planner: PlannerParams = field(default_factory=PlannerParams)
     fleet_map: FleetMapParams = field(default_factory=FleetMapParams)
     manoeuvre: ManoeuvreParams = field(default_factory=ManoeuvreParams)
+    traffic: TrafficParams = field(default_factory=TrafficParams)
     apf: FieldParams = field(default_factory=FieldParams)
     docking: DockingParams = field(default_factory=DockingParams)
     monitor: MonitorParams = field(default_factory=MonitorParams)
