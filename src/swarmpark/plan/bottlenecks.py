@@ -2,10 +2,11 @@
 
 A bottleneck is a stretch of the free space's medial axis (its skeleton,
 ``skimage.morphology.medial_axis``) narrower than one *lane* (two skids side by side) but
-wide enough for one skid, that separates the free space: take its zone away and the space on
-its two sides is no longer connected (a corner of a room also has a narrow skeleton branch
-but separates nothing; a gap between a pillar and a wall can be driven around). Each bottleneck becomes a *zone*: the free cells within its half width
-plus a pad of its skeleton, the part of the floor where skids meet head-on or jam.
+wide enough for one skid all along, that separates the free space: take its zone away and the
+space on its two sides is no longer connected (a corner of a room also has a narrow skeleton
+branch but separates nothing; a gap between a pillar and a wall can be driven around). Each
+bottleneck becomes a *zone*: the free cells within its half width plus a pad of its throat
+(where it is narrowest), the part of the floor where skids meet head-on or jam.
 
 The free space outside all zones splits into *regions* (connected components): a skid's
 direction through a zone is the region it comes from. The navigation's traffic control
@@ -23,7 +24,10 @@ from skimage.morphology import medial_axis
 
 from swarmpark.core.gridmap import OccupancyGrid
 
-__all__ = ["Bottlenecks", "find_bottlenecks"]
+__all__ = ["THROAT_TOLERANCE_M", "Bottlenecks", "find_bottlenecks"]
+
+#: A zone is centred on its throat: the skeleton within this much of the passage's least width.
+THROAT_TOLERANCE_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -87,19 +91,24 @@ def find_bottlenecks(
     skel, dist = medial_axis(np.pad(free, 1), return_distance=True)
     skel, dist = skel[1:-1, 1:-1], dist[1:-1, 1:-1]
     width = 2.0 * dist * res
-    narrow = skel & (width >= min_width_m) & (width < lane_width_m)
+    narrow = skel & (width < lane_width_m)
     comp, n = ndimage.label(narrow, structure=np.ones((3, 3)))
     zone = np.zeros(free.shape, int)
     polygons, widths = [], []
     for k in range(1, n + 1):
         pts = comp == k
-        reach = float(width[pts].max() / 2 + pad_m)
-        cand = free & (ndimage.distance_transform_edt(~pts) * res <= reach) & (zone == 0)
+        w_min = float(width[pts].min())
+        if w_min < min_width_m:
+            continue  # too narrow for a skid somewhere along it: a wall to the fleet
+        # The throat: where the passage is (nearly) at its narrowest.
+        throat = pts & (width <= w_min + THROAT_TOLERANCE_M)
+        reach = float(width[throat].max() / 2 + pad_m)
+        cand = free & (ndimage.distance_transform_edt(~throat) * res <= reach) & (zone == 0)
         if not cand.any() or not _separates(free, cand):
             continue
         zone[cand] = len(polygons) + 1
         polygons.append(_outline(cand, res, g.origin))
-        widths.append(float(width[pts].min()))
+        widths.append(w_min)
     region, _ = ndimage.label(free & (zone == 0), structure=np.ones((3, 3)))
     return Bottlenecks(zone, region, tuple(polygons), tuple(widths), res, np.asarray(g.origin))
 
