@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from navkit import FOOTPRINT, make_view
 
@@ -41,7 +43,7 @@ def test_parked_skids_are_lethal_and_goal_spots_cost_extra():
     assert np.isfinite(fcm_hi.cost[rc[0, 0], rc[0, 1]])
 
 
-def test_plan_goes_around_a_parked_skid_and_is_repaired_when_one_parks_on_it():
+def test_first_plan_is_static_and_is_repaired_when_a_skid_parks_on_it():
     poses = [[1.0, 3.0, 0.0], [5.0, 1.0, np.pi / 2]]
     goals = [[9.0, 3.0, 0.0], [5.0, 3.0, np.pi / 2]]
     states = [PathState(), PathState()]
@@ -51,18 +53,20 @@ def test_plan_goes_around_a_parked_skid_and_is_repaired_when_one_parks_on_it():
     moving = FleetState(parked=np.zeros(2, bool), bound=np.ones(2, bool), still=np.zeros(2, bool))
     pl.update(view, states, fol, moving)
     first = states[0].path
-    # The straight line runs through skid 1's goal spot; the plan goes around it.
-    assert not _crosses(first, goals[1], grow=0.0)
-    # Skid 1 parks across the hall where skid 0's path runs: skid 0 is planned again.
-    blocker = [3.0, 3.0, np.pi / 2]
-    blocker = [float(first[1][0]) if len(first) > 2 else 3.0, float(first[1][1]), np.pi / 2]
-    view = make_view([poses[0], blocker], [goals[0], blocker])
+    # The first plan is the static map's: straight through skid 1's (empty) goal spot.
+    assert _crosses(first, goals[1], grow=0.0)
+    # Skid 1 parks there, on skid 0's path: skid 0 is planned again, round it.
+    view = make_view([poses[0], goals[1]], goals)
     parked = FleetState(
         parked=np.array([False, True]), bound=np.array([True, False]), still=np.zeros(2, bool)
     )
     pl.update(view, states, fol, parked)
     assert states[0].path is not first
-    assert not _crosses(states[0].path, blocker, grow=0.3)
+    assert not _crosses(states[0].path, goals[1], grow=0.3)
+    # Nothing new parked: no new plan.
+    again = states[0].path
+    pl.update(replace(view, t=0.1), states, fol, parked)
+    assert states[0].path is again
 
 
 def test_stuck_skid_is_planned_again_with_the_still_skids_as_obstacles():

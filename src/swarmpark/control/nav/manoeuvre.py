@@ -33,6 +33,8 @@ class ManoeuvreState:
 
     segments: list | None = None
     seg: int = 0
+    #: When the current segment must be done by (a watchdog: dropped after that).
+    seg_deadline: float = np.inf
     best_left_m: float = np.inf
     best_t: float = 0.0
     retry_t: float = -np.inf
@@ -47,6 +49,7 @@ class ManoeuvreState:
 
     def stop(self, t: float, retry_s: float) -> None:
         self.segments, self.seg, self.blocked_s = None, 0, 0.0
+        self.seg_deadline = np.inf
         self.retry_t = t + retry_s
         self.best_left_m, self.best_t = np.inf, t
 
@@ -187,6 +190,7 @@ class ManoeuvrePlanner:
             st.stop(view.t, p.retry_s)
             return
         st.segments, st.seg, st.blocked_s = plan.segments(), 0, 0.0
+        st.seg_deadline = np.inf
         st.goal = view.goals[i].copy()
 
     # ------------------------------------------------------------------ driving
@@ -198,8 +202,18 @@ class ManoeuvrePlanner:
         pose = view.poses[i]
         v_max = float(view.max_speed[i]) * p.speed_share
         w_max = float(view.max_yaw_rate[i]) * p.speed_share
+        if view.t > st.seg_deadline:
+            st.stop(view.t, p.retry_s)  # the segment takes far too long: plan again later
+            return None
         while st.seg < len(st.segments):
             kind, a, b = st.segments[st.seg]
+            if not np.isfinite(st.seg_deadline):
+                expect = (
+                    abs(wrap_angle(b[2] - a[2])) / w_max
+                    if kind == "turn"
+                    else float(np.hypot(*(b[:2] - a[:2]))) / v_max
+                )
+                st.seg_deadline = view.t + p.timeout_factor * expect + p.timeout_s
             if kind == "turn":
                 err = wrap_angle(b[2] - pose[2])
                 if abs(err) > p.done_rad:
@@ -219,6 +233,7 @@ class ManoeuvrePlanner:
                     speed *= max(np.cos(err), 0.0)
                     return np.array([d * speed, np.clip(p.k_yaw * err, -w_max, w_max)])
             st.seg += 1
+            st.seg_deadline = np.inf
         st.segments, st.seg = None, 0
         st.best_left_m, st.best_t = np.inf, view.t
         return None

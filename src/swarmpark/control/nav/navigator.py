@@ -133,7 +133,7 @@ class Navigator:
         scene = self.scene.update(view)
         paths = self._states("path")
         fleet = self._fleet(view)
-        self.planner.update(view, paths, self.follower, fleet)
+        self.planner.update(view, paths, self.follower, fleet if p.fleet_map.enabled else None)
         targets, final = self.follower.targets(view, idx, paths)
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
         waiting = self.follower.waiting(view, idx, paths)
@@ -147,7 +147,7 @@ class Navigator:
         held = np.zeros(len(idx), bool) if view.hold is None else view.hold[idx]
         man_states = self._states("manoeuvre")
         queued = np.array([self.robots[i].traffic.waiting > 0 for i in idx], dtype=bool)
-        eligible = ~docked & ~held & ~waiting & ~queued
+        eligible = ~docked & ~held & ~waiting & ~queued & p.manoeuvre.enabled
         man = self.manoeuvre.step(view, idx, raw, man_states, eligible)
         for i in idx[man]:
             self.robots[i].dock.runup = False  # the docking starts afresh after it

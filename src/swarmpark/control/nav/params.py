@@ -116,6 +116,9 @@ class PlannerParams:
 class FleetMapParams:
     """The fleet layers of each plan and the plan repairs (:mod:`.fleetmap`)."""
 
+    #: Off: plans on the static map alone, no repairs (the behaviour before the fleet layers).
+    enabled: bool = True
+
     #: Extra cost per metre inside another skid's goal spot while that skid is on its way
     #: (a path crossing a 1.2 m spot costs as much as this many times 1.2 m more of floor).
     spot_cost: float = 6.0
@@ -138,6 +141,9 @@ class FleetMapParams:
 class ManoeuvreParams:
     """Manoeuvres for a stuck skid's rectangle (:mod:`.manoeuvre`, :mod:`swarmpark.plan.lattice`)."""
 
+    #: Off: no manoeuvres.
+    enabled: bool = True
+
     #: A skid whose remaining distance to its goal (position plus heading at the navigation
     #: lever) has not fallen by ``progress_m`` for ``stuck_s`` plans a manoeuvre.
     stuck_s: float = 8.0
@@ -154,8 +160,12 @@ class ManoeuvreParams:
     #: Reverse moves cost this much more than forward ones; the search's expansion budget.
     reverse_cost: float = 1.5
     budget: int = 400_000
-    #: Dropped when the monitor holds it still this long; tried again after ``retry_s``.
+    #: Dropped when the monitor holds it still this long, or when a segment takes longer
+    #: than ``timeout_factor`` times its time at the manoeuvre's speed plus ``timeout_s``;
+    #: tried again after ``retry_s``.
     blocked_s: float = 3.0
+    timeout_factor: float = 3.0
+    timeout_s: float = 3.0
     retry_s: float = 4.0
     #: Tracking: share of top speed and yaw rate, gains, and when a segment is done. The
     #: speed and turn gains (1/s) stay below 1 / the monitor's horizon, so the monitor's
@@ -176,7 +186,7 @@ class ManoeuvreParams:
         _check(self, {"blocked_s": ">0", "retry_s": ">=0", "speed_share": "share"})
         _check(self, {"k_speed": ">0", "k_yaw": ">0", "k_lateral": ">0"})
         _check(self, {"min_speed_mps": ">0", "min_yaw_rate_radps": ">0", "done_m": ">0"})
-        _check(self, {"done_rad": ">0"})
+        _check(self, {"done_rad": ">0", "timeout_factor": ">0", "timeout_s": ">=0"})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -193,8 +203,9 @@ class TrafficParams:
     resolution_m: float = 0.1
     #: A skid asks for a zone its path enters within this distance.
     lookahead_m: float = 4.0
-    #: Skids from the same side follow each other into a zone this long apart.
-    convoy_gap_s: float = 2.0
+    #: Skids from the same side follow each other into a zone this long apart (0: a zone is
+    #: a one-way lane; only skids coming the other way wait).
+    convoy_gap_s: float = 0.0
     #: A skid without a grant stops this far short of the zone (its command checked this
     #: far ahead in time).
     gap_m: float = 0.3

@@ -87,11 +87,15 @@ class Planner:
             for i, again in zip(active.tolist(), redo.tolist(), strict=True)
             if again or (states[i].failed and view.t - states[i].planned_t >= p.replan_period_s)
         ]
+        # Repairs (only with the fleet known): on the fleet layers. A new goal's first plan and
+        # the retries of a failed one are on the static map, as the skid will find the fleet
+        # moved by the time it gets there.
+        repair: set[int] = set()
         stuck: set[int] = set()
         if fleet is not None:
-            blocked = self._blocked(view, states, follower, fleet)
             stuck = self._stuck(view, states, follower, fleet)
-            wanted = sorted(set(wanted) | blocked | stuck)
+            repair = (self._blocked(view, states, follower, fleet) | stuck) - set(wanted)
+            wanted = sorted(set(wanted) | repair)
         # A bounded number of plans per tick (longest waiting first), so a park command for a
         # hundred skids does not stall the loop; the others wait for their path.
         wanted.sort(key=lambda i: (states[i].planned_t, i))
@@ -100,7 +104,7 @@ class Planner:
             goal = view.goals[i]
             cm = self.costmap(view, view.footprints[i])
             path = None
-            if fleet is not None:
+            if i in repair:
                 parked = fleet.parked | (fleet.still if i in stuck else False)
                 fcm = fleet_costmap(cm, view, i, parked, fleet.bound, self.fleet_params)
                 extra = run_extra(view, i, parked, fleet.bound, self.fleet_params)
