@@ -126,8 +126,9 @@ class FleetMapParams:
     band_m: float = 0.3
     band_cost: float = 2.0
     #: A skid that has not shortened its remaining path by ``stuck_progress_m`` for this long
-    #: is planned again, with the skids standing still around it as obstacles.
-    stuck_s: float = 6.0
+    #: is planned again, with the skids standing still around it as obstacles (tuned on the
+    #: suite and generated training sites: 6 s made the suite's elevator slower, 74.7 -> 85 s).
+    stuck_s: float = 10.0
     stuck_progress_m: float = 0.3
     #: A skid held still this long (its stall watch) counts as standing still for a repair.
     still_s: float = 2.0
@@ -145,8 +146,9 @@ class ManoeuvreParams:
     enabled: bool = True
 
     #: A skid whose remaining distance to its goal (position plus heading at the navigation
-    #: lever) has not fallen by ``progress_m`` for ``stuck_s`` plans a manoeuvre.
-    stuck_s: float = 8.0
+    #: lever) has not fallen by ``progress_m`` for ``stuck_s`` plans a manoeuvre (after a
+    #: plan repair has had its chance; 8 s made the suite's elevator slower, 74.7 -> 100 s).
+    stuck_s: float = 12.0
     progress_m: float = 0.15
     #: The planning window: the box around the skid and its goal grown by this, at most
     #: ``max_window_m`` on a side (farther goals are left to the path planner's repairs).

@@ -187,8 +187,8 @@ class Planner:
         """A path that ends with a straight run along the goal's axis.
 
         The path is planned to a staging point ``staging_m`` before the goal on its axis
-        (behind it, to drive in forwards, or in front of it, to back in: whichever costs
-        less, the run included) and the goal is appended, so the skid arrives aligned. Falls
+        (behind it, to drive in forwards, or in front of it, to back in: whichever is shorter,
+        or on the fleet layers costs less, the run included) and the goal is appended, so the skid arrives aligned. Falls
         back to a direct path when neither staging point can be reached or the skid is
         already close. ``run_extra(points)``: the extra cost per metre the fleet layers add
         along a run (``inf``: blocked by a parked skid).
@@ -207,10 +207,14 @@ class Planner:
         best, best_cost = None, np.inf
         for stage, head, c in zip(stages, heads, costs[1:], strict=True):
             run = self._run_cost(cm, goal, stage, run_extra)
-            if head is None or not np.isfinite(run) or c + run >= best_cost:
+            if head is None or not np.isfinite(run):
                 continue
-            best = np.vstack([shortcut(head, cm.cost, cm.grid), goal[:2][None]])
-            best_cost = c + run
+            cand = np.vstack([shortcut(head, cm.cost, cm.grid), goal[:2][None]])
+            # On the static map the shorter path wins; on the fleet layers the cheaper one (a
+            # path through the spots of skids still on their way costs more than its length).
+            total = path_length(cand) if run_extra is None else c + run
+            if total < best_cost:
+                best, best_cost = cand, total
         return best if best is not None else direct
 
     def _run_cost(self, cm: Costmap, goal: np.ndarray, stage: np.ndarray, run_extra) -> float:
