@@ -63,7 +63,9 @@ def test_into_a_spot_that_only_a_turn_on_the_spot_reaches():
     kinds = [s[0] for s in m.segments()]
     assert "turn" in kinds and kinds[-1] in ("forward", "reverse")
     # Deterministic.
-    again = plan_manoeuvre(occ, np.zeros(2), RES, FP, start, goal, speed_mps=0.5, yaw_rate_radps=1.0)
+    again = plan_manoeuvre(
+        occ, np.zeros(2), RES, FP, start, goal, speed_mps=0.5, yaw_rate_radps=1.0
+    )
     np.testing.assert_array_equal(again.poses, m.poses)
 
 

@@ -12,7 +12,7 @@ from swarmpark.control.nav.follower import PathFollower, PathState
 from swarmpark.control.nav.params import FleetMapParams, FollowerParams, PlannerParams
 from swarmpark.control.nav.planner import Planner
 
-P = FleetMapParams()
+P = FleetMapParams(spot_cost=6.0)  # the spot layer on, to test it
 
 
 def _planner():

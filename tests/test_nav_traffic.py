@@ -33,7 +33,9 @@ def test_skids_from_opposite_sides_take_turns_and_the_waiting_one_stops_short():
     states = [TrafficState(), TrafficState()]
     parked = np.zeros(2, bool)
     cmd = np.array([[0.5, 0.0], [0.5, 0.0]])
-    waiting = tc.step(view, np.arange(2), cmd, paths, PathFollower(FollowerParams()), states, parked)
+    waiting = tc.step(
+        view, np.arange(2), cmd, paths, PathFollower(FollowerParams()), states, parked
+    )
     assert tc.zones.count == 1
     assert states[0].zone == 1 and states[1].zone == 0 and states[1].waiting == 1
     assert waiting.tolist() == [False, True]

@@ -75,8 +75,10 @@ class Manoeuvre:
         names = {1: "forward", -1: "reverse", 2: "turn"}
         for m in range(1, len(self.poses)):
             kind = names[int(self.moves[m])]
-            if out and out[-1][0] == kind and (
-                kind == "turn" or abs(out[-1][2][2] - self.poses[m][2]) < 1e-9
+            if (
+                out
+                and out[-1][0] == kind
+                and (kind == "turn" or abs(out[-1][2][2] - self.poses[m][2]) < 1e-9)
             ):
                 out[-1] = (kind, out[-1][1], self.poses[m])
             else:
@@ -251,9 +253,7 @@ def plan_manoeuvre(
     st = np.array(chain)
     k, rc = st // (n_r * n_c), st % (n_r * n_c)
     r, c = rc // n_c, rc % n_c
-    poses = np.column_stack(
-        [origin[0] + (c + 0.5) * res, origin[1] + (r + 0.5) * res, HEADINGS[k]]
-    )
+    poses = np.column_stack([origin[0] + (c + 0.5) * res, origin[1] + (r + 0.5) * res, HEADINGS[k]])
     moves = move[st].astype(int)
     moves[0] = 0
     return Manoeuvre(poses, moves, float(cost), int(expanded), np.asarray(goal, float).copy())

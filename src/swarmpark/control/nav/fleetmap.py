@@ -164,9 +164,10 @@ def run_extra(
     fps = view.footprints
 
     def extra(pts: np.ndarray) -> float:
-        if len(block) and points_in_rects(
-            pts, view.poses[block], [fps[j] for j in block], r_in - 1e-3
-        ).any():
+        if (
+            len(block)
+            and points_in_rects(pts, view.poses[block], [fps[j] for j in block], r_in - 1e-3).any()
+        ):
             return np.inf
         if not len(others):
             return 0.0

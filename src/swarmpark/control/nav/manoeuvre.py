@@ -37,6 +37,8 @@ class ManoeuvreState:
     seg_deadline: float = np.inf
     best_left_m: float = np.inf
     best_t: float = 0.0
+    #: Where the skid stood when the progress watch last restarted.
+    anchor: np.ndarray | None = field(default=None, repr=False)
     retry_t: float = -np.inf
     blocked_s: float = 0.0
     goal: np.ndarray | None = field(default=None, repr=False)
@@ -94,8 +96,12 @@ class ManoeuvrePlanner:
             if not eligible[k]:
                 st.best_left_m, st.best_t = np.inf, view.t
                 continue
-            if left[k] < st.best_left_m - p.progress_m:
+            # Progress, or travel: a skid driving round an obstacle away from its goal is
+            # not stuck, one loitering within roam_m of where it last got closer is.
+            roamed = st.anchor is not None and np.hypot(*(pose[k, :2] - st.anchor)) > p.roam_m
+            if left[k] < st.best_left_m - p.progress_m or roamed or st.anchor is None:
                 st.best_left_m, st.best_t = left[k], view.t
+                st.anchor = pose[k, :2].copy()
             if not st.running():
                 if view.t - st.best_t < p.stuck_s or view.t < st.retry_t:
                     continue

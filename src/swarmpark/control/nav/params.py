@@ -121,7 +121,10 @@ class FleetMapParams:
 
     #: Extra cost per metre inside another skid's goal spot while that skid is on its way
     #: (a path crossing a 1.2 m spot costs as much as this many times 1.2 m more of floor).
-    spot_cost: float = 6.0
+    #: Off by default: at 6 the repaired paths went round whole bays to keep off spots still
+    #: empty when the skid passed (the suite's hangar-bay-12 no longer parked; a generated
+    #: hangar took 76 s instead of 34 s).
+    spot_cost: float = 0.0
     #: Cost band around a parked skid (beyond the lethal part): width and extra cost per metre.
     band_m: float = 0.3
     band_cost: float = 2.0
@@ -150,6 +153,9 @@ class ManoeuvreParams:
     #: plan repair has had its chance; 8 s made the suite's elevator slower, 74.7 -> 100 s).
     stuck_s: float = 12.0
     progress_m: float = 0.15
+    #: ... and has stayed within this distance of where it last got closer (a skid driving
+    #: round an obstacle, away from its goal, is not stuck).
+    roam_m: float = 1.0
     #: The planning window: the box around the skid and its goal grown by this, at most
     #: ``max_window_m`` on a side (farther goals are left to the path planner's repairs).
     window_margin_m: float = 2.5
@@ -183,6 +189,7 @@ class ManoeuvreParams:
 
     def __post_init__(self) -> None:
         _check(self, {"stuck_s": ">0", "progress_m": ">0", "window_margin_m": ">0"})
+        _check(self, {"roam_m": ">0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
         _check(self, {"grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"})
         _check(self, {"blocked_s": ">0", "retry_s": ">=0", "speed_share": "share"})

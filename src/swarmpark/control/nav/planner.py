@@ -197,9 +197,7 @@ class Planner:
         stages = [goal[:2] + side * self.staging_m * axis for side in (-1.0, 1.0)]
         # One Dijkstra run serves the direct path and both staging points.
         costs: list[float] = []
-        direct, *heads = paths_from(
-            cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs
-        )
+        direct, *heads = paths_from(cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs)
         if direct is not None:
             direct = shortcut(direct, cm.cost, cm.grid)
         if direct is None or np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
