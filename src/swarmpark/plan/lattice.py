@@ -219,7 +219,7 @@ def plan_manoeuvre(
         return int(np.argmin(dk)), r, c
 
     s, g = snap(start), snap(goal)
-    for k, r, c in (s, g):
+    for _k, r, c in (s, g):
         if not (0 <= r < n_r and 0 <= c < n_c):
             return None
     free[s] = True  # leave from where it stands

@@ -108,7 +108,7 @@ class TrafficControl:
                 continue
             asks.setdefault(ahead[0], []).append((ahead[1], i, ahead[2]))
         for zone, queue in asks.items():
-            for dist, i, side in sorted(queue):
+            for _dist, i, side in sorted(queue):
                 if self._grant(view, zone, side, states, p):
                     st = states[i]
                     st.zone, st.side, st.since = zone, side, view.t
