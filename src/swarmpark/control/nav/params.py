@@ -145,7 +145,8 @@ class FleetMapParams:
 class ManoeuvreParams:
     """Manoeuvres for a stuck skid's rectangle (:mod:`.manoeuvre`, :mod:`swarmpark.plan.lattice`)."""
 
-    #: Off: no manoeuvres.
+    #: Off: no manoeuvres (they are used with the monitor avoidance only: with RVO the
+    #: deadlock ladder recovers).
     enabled: bool = True
 
     #: A skid whose remaining distance to its goal (position plus heading at the navigation
