@@ -55,10 +55,10 @@ def test_skids_from_opposite_sides_take_turns_and_the_waiting_one_stops_short():
 
 def test_skids_from_the_same_side_follow_in_a_convoy():
     view, paths = _setup([[2.4, 3.0, 0.0], [1.2, 3.0, 0.0]], [[9.0, 3.0, 0.0], [8.0, 3.5, 0.0]])
-    # By default a zone is a one-way lane: both from the same side go at once.
+    # Without a convoy gap a zone is a one-way lane: both from the same side go at once.
     states = [TrafficState(), TrafficState()]
     fol = PathFollower(FollowerParams())
-    TrafficControl(TrafficParams()).step(
+    TrafficControl(TrafficParams(convoy_gap_s=0.0)).step(
         view, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool)
     )
     assert states[0].zone == states[1].zone == 1

@@ -53,12 +53,19 @@ class FleetState:
     """What the planner needs to know of the fleet this tick (each ``(N,)`` bool).
 
     ``parked``: fixed obstacles (settled on their goal, stopped, or without orders);
-    ``bound``: on their way to a goal; ``still``: on their way but held still for a while.
+    ``bound``: on their way to a goal; ``still``: on their way but held still for a while;
+    ``waiting``: waiting on purpose (held back by the fill order, queued at a bottleneck),
+    which is not being stuck.
     """
 
     parked: np.ndarray
     bound: np.ndarray
     still: np.ndarray
+    waiting: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.waiting is None:
+            object.__setattr__(self, "waiting", np.zeros(len(self.parked), dtype=bool))
 
 
 def rect_cells(cm: Costmap, pose: np.ndarray, fp: Footprint, grow_m: float):

@@ -221,7 +221,10 @@ class Navigator:
         parked = settled | ~view.active | stopped
         held = np.array([r.stall.stalled_s for r in self.robots]) >= self.params.fleet_map.still_s
         bound = view.active & ~settled
-        return FleetState(parked=parked, bound=bound, still=bound & held)
+        waiting = np.array([r.traffic.waiting > 0 for r in self.robots], dtype=bool)
+        if view.hold is not None:
+            waiting |= view.hold
+        return FleetState(parked=parked, bound=bound, still=bound & held, waiting=waiting)
 
     def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
         """Commands ``raw`` of skids ``idx`` not driven by this controller (teleop), scaled

@@ -105,9 +105,12 @@ class Planner:
             cm = self.costmap(view, view.footprints[i])
             path = None
             if i in repair:
+                # A blocked plan goes round the skids parked on it; a stuck skid's also round
+                # the skids standing still and, if it can, off the spots still to be filled.
                 parked = fleet.parked | (fleet.still if i in stuck else False)
-                fcm = fleet_costmap(cm, view, i, parked, fleet.bound, self.fleet_params)
-                extra = run_extra(view, i, parked, fleet.bound, self.fleet_params)
+                bound = fleet.bound if i in stuck else np.zeros_like(fleet.bound)
+                fcm = fleet_costmap(cm, view, i, parked, bound, self.fleet_params)
+                extra = run_extra(view, i, parked, bound, self.fleet_params)
                 path = self.plan(fcm, view.poses[i], goal, extra)
             if path is None:  # no way around the fleet: the static map's (avoidance copes)
                 path = self.plan(cm, view.poses[i], goal)
@@ -171,7 +174,9 @@ class Planner:
         out: set[int] = set()
         for i, left_m in zip(rows.tolist(), left.tolist(), strict=True):
             st = states[i]
-            if left_m < st.best_left_m - fp.stuck_progress_m:
+            if fleet.waiting[i]:  # waiting on purpose: the clock stops
+                st.best_left_m, st.best_t = left_m, view.t
+            elif left_m < st.best_left_m - fp.stuck_progress_m:
                 st.best_left_m, st.best_t = left_m, view.t
             elif (
                 view.t - st.best_t >= fp.stuck_s
