@@ -70,6 +70,29 @@ def test_deadlock_is_reported_when_pushing_into_a_wall():
     # The wall face is at x = 4: the pivot stops at 3.4 after about 2.9 s; the last progress
     # of at least 0.05 m happens shortly before, then 10 s pass.
     assert 2.0 < dl["start_s"] < 3.5
+    # A scripted controller cannot say why: the cause says so.
+    assert dl["cause"] == "no progress"
+
+
+def test_deadlock_names_its_cause_from_the_navigator():
+    """The default navigator says what held a skid up when its deadlock is reported: here the
+    goal is inside a closed box, so there is no path."""
+    world = make_world(
+        duration_s=25,
+        map={
+            "size_m": [10, 6],
+            "resolution_m": 0.05,
+            "walls": [
+                [[6, 2], [8, 2], [8, 2.2], [6, 2.2]],
+                [[6, 3.8], [8, 3.8], [8, 4], [6, 4]],
+                [[6, 2.2], [6.2, 2.2], [6.2, 3.8], [6, 3.8]],
+                [[7.8, 2.2], [8, 2.2], [8, 3.8], [7.8, 3.8]],
+            ],
+        },
+        commands=[{"at_s": 0, "goto": {"robot": "a", "pose": [7.0, 3.0, 0.0]}}],
+    )
+    (dl,) = run_world(world).result["deadlocks"]
+    assert dl["cause"] == "no path to its goal on the known map"
 
 
 def test_lower_bound_goes_around_a_wall():

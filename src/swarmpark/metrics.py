@@ -7,6 +7,7 @@ by the runner and passed in; nothing here reads a clock.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,10 +47,16 @@ OCTILE_RATIO = float(np.hypot(1.0, np.sqrt(2.0) - 1.0))
 
 @dataclass
 class Deadlock:
+    """A deadlock episode: a robot with an unreached goal and no progress since ``start_s``
+    (reported once that has lasted :data:`DEADLOCK_WINDOW_S`, so every reported episode is a
+    defect), until progress or a pause ends it, and what the controller said held it when it
+    was reported (``cause``)."""
+
     robot: str
     start_s: float
     end_s: float | None = None
     resolved_by: str | None = None
+    cause: str | None = None
 
     def as_dict(self) -> dict:
         dur = None if self.end_s is None else round(self.end_s - self.start_s, 3)
@@ -59,6 +66,7 @@ class Deadlock:
             "end_s": None if self.end_s is None else round(self.end_s, 3),
             "cleared_after_s": dur,
             "resolved_by": self.resolved_by,
+            "cause": self.cause,
         }
 
 
@@ -78,6 +86,9 @@ class MetricsRecorder:
     min_clearance_robot: float = np.inf
     min_clearance_static: float = np.inf
     first_goal_s: float | None = None
+    #: What holds robot ``i`` up, asked when a deadlock is reported (the supervisor sets it
+    #: from the controller); None: the cause is not reported.
+    explain: Callable[[int], str] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.ids)
@@ -185,6 +196,7 @@ class MetricsRecorder:
             dl = self._deadlock[i]
             if dl is None and t - self._best_t[i] >= DEADLOCK_WINDOW_S and has_goal[i]:
                 dl = Deadlock(self.ids[i], float(self._best_t[i]))
+                dl.cause = None if self.explain is None else self.explain(i)
                 self._deadlock[i] = dl
                 self.deadlocks.append(dl)
             elif dl is not None and reset[i]:

@@ -122,8 +122,14 @@ def plan_path(costmap: Costmap, start_xy, goal_xy, *, free_radius_m: float | Non
     return shortcut(pts, cost, grid)
 
 
-def paths_from(costmap: Costmap, start_xy, goals_xy) -> list[np.ndarray | None]:
-    """Least-cost paths from one start to many goals with a single Dijkstra run."""
+def paths_from(
+    costmap: Costmap, start_xy, goals_xy, *, costs: list | None = None
+) -> list[np.ndarray | None]:
+    """Least-cost paths from one start to many goals with a single Dijkstra run.
+
+    ``costs``: if given (a list), the accumulated cost of each path (``inf`` for none) is
+    appended to it, in metres weighted by the cells' costs.
+    """
     grid = costmap.grid
     start_xy = np.asarray(start_xy, float)
     goals_xy = np.asarray(goals_xy, float).reshape(-1, 2)
@@ -132,6 +138,8 @@ def paths_from(costmap: Costmap, start_xy, goals_xy) -> list[np.ndarray | None]:
         cost = _free_disc(cost, grid, g, costmap.inscribed_m)
     s = grid.world_to_cell(start_xy[None])[0]
     if not grid.in_bounds(s[None])[0] or not np.isfinite(cost[tuple(s)]):
+        if costs is not None:
+            costs += [np.inf] * len(goals_xy)
         return [None] * len(goals_xy)
     mcp = MCP_Geometric(cost, fully_connected=True)
     cum, _ = mcp.find_costs([tuple(s)])
@@ -139,7 +147,11 @@ def paths_from(costmap: Costmap, start_xy, goals_xy) -> list[np.ndarray | None]:
     for g_xy, g in zip(goals_xy, grid.world_to_cell(goals_xy), strict=True):
         if not grid.in_bounds(g[None])[0] or not np.isfinite(cum[tuple(g)]):
             out.append(None)
+            if costs is not None:
+                costs.append(np.inf)
             continue
+        if costs is not None:
+            costs.append(float(cum[tuple(g)]) * grid.resolution_m)
         pts = grid.cell_to_world(np.asarray(mcp.traceback(tuple(g))))
         pts[0], pts[-1] = start_xy, g_xy
         out.append(pts)

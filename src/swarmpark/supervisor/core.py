@@ -131,6 +131,7 @@ class Supervisor(CommandsMixin):
         self.health.heartbeat(self.t, self.inbox.odom_stamp)
         self._sent = np.zeros((n, 2))
         self.metrics = MetricsRecorder(self.ids, self.truth_poses().copy())
+        self.metrics.explain = self._explain
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
         )
@@ -235,6 +236,20 @@ class Supervisor(CommandsMixin):
             self.link.teleport(i, pose)
             self.metrics.moved_by_hand(i, pose)
             self.kidnapped.append((i, self.t))
+
+    def _explain(self, i: int) -> str:
+        """What holds robot ``i`` up, for a deadlock report: the fill order, a stop, or what
+        the controller says (with robot ids)."""
+        if self.stopped[i] or self.teleop[i] or self.estopped:
+            return "stopped by the operator"
+        held = self.held()
+        if len(held) == self.n and held[i]:
+            return "held outside its boundary by the fill order"
+        explain = getattr(self.controller, "explain", None)
+        if explain is None:
+            return "no progress"
+        reason, others = explain(i)
+        return reason if not others else f"{reason}: {', '.join(self.ids[j] for j in others)}"
 
     def _run_due_commands(self) -> None:
         eps = 1e-9
@@ -346,9 +361,10 @@ class Supervisor(CommandsMixin):
             self._sense()
         # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
         paused = self.stopped | self.teleop | self.estopped | view.hold | self.health.faulted
-        aside = getattr(self.controller, "making_room", None)  # standing aside (RVO)
-        if aside is not None and len(aside) == self.n:
-            paused = paused | aside
+        for name in ("making_room", "queued"):  # standing aside (RVO), queued at a door
+            aside = getattr(self.controller, name, None)
+            if aside is not None and len(aside) == self.n:
+                paused = paused | aside
         self.metrics.on_step(self.t, self.truth_poses(), self.goals, self.has_goal, paused, step)
         return step
 

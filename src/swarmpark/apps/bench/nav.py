@@ -208,3 +208,39 @@ def bench_fleet(quick: bool) -> list[dict]:
             }
         )
     return rows
+
+
+@register(
+    "nav.manoeuvre",
+    "one manoeuvre on the state lattice (plan/lattice.py): into a spot between a pillar and a "
+    "parked neighbour, 6 x 6 m window at 5 cm, 16 headings",
+    target="< 200 ms (it runs only for a skid stuck for 12 s)",
+)
+def bench_manoeuvre(quick: bool) -> list[dict]:
+    from swarmpark.core.geometry import Footprint
+    from swarmpark.plan.lattice import plan_manoeuvre
+
+    res = 0.05
+    occ = np.zeros((120, 120), bool)
+    occ[:, :2] = occ[:, -2:] = occ[:2, :] = occ[-2:, :] = True
+    for x0, y0, x1, y1 in ((2.4, 1.6, 3.2, 2.4), (1.2, 2.6, 2.0, 3.8), (2.4, 4.0, 3.2, 5.1)):
+        occ[int(y0 / res) : int(y1 / res), int(x0 / res) : int(x1 / res)] = True
+    fp = Footprint(1.2, 0.8, 0.6)
+    start, goal = np.array([5.0, 1.0, np.pi / 2]), np.array([2.8, 3.2, np.pi / 2])
+
+    def run():
+        return plan_manoeuvre(
+            occ, np.zeros(2), res, fp, start, goal, speed_mps=0.5, yaw_rate_radps=1.0
+        )
+
+    m = run()  # compiles the search (numba) on a fresh machine
+    repeat = 3 if quick else 10
+    return [
+        {
+            "window_cells": int(occ.size),
+            **time_call(run, repeat),
+            "cpu_median_ms": _cpu_median_ms(run, repeat),
+            "expanded": m.expanded,
+            "segments": len(m.segments()),
+        }
+    ]

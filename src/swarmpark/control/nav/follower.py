@@ -43,6 +43,9 @@ class PathState:
     planned_t: float = -np.inf
     failed: bool = False
     reverse: bool = False
+    #: The least remaining path length reached on this plan and when (for plan repairs).
+    best_left_m: float = np.inf
+    best_t: float = -np.inf
     # The geometry of ``_geom_path`` (held, so identity tells whether ``path`` was replaced).
     _geom_path: np.ndarray | None = field(default=None, repr=False, compare=False)
     _geom: PathGeometry | None = field(default=None, repr=False, compare=False)

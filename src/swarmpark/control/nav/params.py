@@ -22,14 +22,17 @@ __all__ = [
     "DeadlockParams",
     "DockingParams",
     "FieldParams",
+    "FleetMapParams",
     "FollowerParams",
     "GiveWayParams",
     "HoldParams",
     "MakeRoomParams",
+    "ManoeuvreParams",
     "MonitorParams",
     "NavParams",
     "PlannerParams",
     "StallParams",
+    "TrafficParams",
 ]
 
 
@@ -107,6 +110,126 @@ class PlannerParams:
         _check(self, {"staging_check_points": "int>0"})
         if self.plan_resolution_m is not None:
             _check(self, {"plan_resolution_m": ">0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class FleetMapParams:
+    """The fleet layers of each plan and the plan repairs (:mod:`.fleetmap`)."""
+
+    #: Off: plans on the static map alone, no repairs (the behaviour before the fleet layers).
+    enabled: bool = True
+
+    #: Extra cost per metre inside another skid's goal spot while that skid is on its way
+    #: (a path crossing a 1.2 m spot costs as much as this many times 1.2 m more of floor).
+    #: Off by default: at 6 the repaired paths went round whole bays to keep off spots still
+    #: empty when the skid passed (the suite's hangar-bay-12 no longer parked; a generated
+    #: hangar took 76 s instead of 34 s).
+    spot_cost: float = 0.0
+    #: Cost band around a parked skid (beyond the lethal part): width and extra cost per metre.
+    band_m: float = 0.3
+    band_cost: float = 2.0
+    #: A skid that has not shortened its remaining path by ``stuck_progress_m`` for this long
+    #: is planned again, with the skids standing still around it as obstacles (tuned on the
+    #: suite and generated training sites: 6 s made the suite's elevator slower, 74.7 -> 85 s).
+    stuck_s: float = 10.0
+    stuck_progress_m: float = 0.3
+    #: A skid held still this long (its stall watch) counts as standing still for a repair.
+    still_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        _check(self, {"spot_cost": ">=0", "band_m": ">=0", "band_cost": ">=0"})
+        _check(self, {"stuck_s": ">0", "stuck_progress_m": ">0", "still_s": ">=0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class ManoeuvreParams:
+    """Manoeuvres for a stuck skid's rectangle (:mod:`.manoeuvre`, :mod:`swarmpark.plan.lattice`)."""
+
+    #: Off: no manoeuvres (they are used with the monitor avoidance only: with RVO the
+    #: deadlock ladder recovers).
+    enabled: bool = True
+
+    #: A skid whose remaining distance to its goal (position plus heading at the navigation
+    #: lever) has not fallen by ``progress_m`` for ``stuck_s`` plans a manoeuvre (after a
+    #: plan repair has had its chance; 8 s made the suite's elevator slower, 74.7 -> 100 s).
+    stuck_s: float = 12.0
+    progress_m: float = 0.15
+    #: ... and has stayed within this distance of where it last got closer (a skid driving
+    #: round an obstacle, away from its goal, is not stuck).
+    roam_m: float = 1.0
+    #: The planning window: the box around the skid and its goal grown by this, at most
+    #: ``max_window_m`` on a side (farther goals are left to the path planner's repairs).
+    window_margin_m: float = 2.5
+    max_window_m: float = 14.0
+    #: Other skids are obstacles grown by this; people by ``person_margin_m``; the skid's own
+    #: footprint is grown by ``grow_m`` (besides half a cell diagonal) for collision checks.
+    skid_margin_m: float = 0.05
+    person_margin_m: float = 0.3
+    grow_m: float = 0.02
+    #: Reverse moves cost this much more than forward ones; the search's expansion budget.
+    reverse_cost: float = 1.5
+    budget: int = 400_000
+    #: Dropped when the monitor holds it still this long, or when a segment takes longer
+    #: than ``timeout_factor`` times its time at the manoeuvre's speed plus ``timeout_s``;
+    #: tried again after ``retry_s``.
+    blocked_s: float = 3.0
+    timeout_factor: float = 3.0
+    timeout_s: float = 3.0
+    retry_s: float = 4.0
+    #: Tracking: share of top speed and yaw rate, gains, and when a segment is done. The
+    #: speed and turn gains (1/s) stay below 1 / the monitor's horizon, so the monitor's
+    #: rollout of a held command ends inside the segment, not past it at a wall.
+    speed_share: float = 0.5
+    k_speed: float = 0.9
+    k_yaw: float = 0.9
+    k_lateral: float = 3.0
+    min_speed_mps: float = 0.05
+    min_yaw_rate_radps: float = 0.1
+    done_m: float = 0.03
+    done_rad: float = float(np.deg2rad(2.0))
+
+    def __post_init__(self) -> None:
+        _check(self, {"stuck_s": ">0", "progress_m": ">0", "window_margin_m": ">0"})
+        _check(self, {"roam_m": ">0"})
+        _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
+        _check(self, {"grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"})
+        _check(self, {"blocked_s": ">0", "retry_s": ">=0", "speed_share": "share"})
+        _check(self, {"k_speed": ">0", "k_yaw": ">0", "k_lateral": ">0"})
+        _check(self, {"min_speed_mps": ">0", "min_yaw_rate_radps": ">0", "done_m": ">0"})
+        _check(self, {"done_rad": ">0", "timeout_factor": ">0", "timeout_s": ">=0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrafficParams:
+    """Queues at the bottlenecks (:mod:`.traffic`, :mod:`swarmpark.plan.bottlenecks`)."""
+
+    #: Off: no zones, no queues.
+    enabled: bool = True
+    #: A lane is two of the widest skids side by side plus this; narrower passages are zones.
+    lane_clearance_m: float = 1.2
+    #: Zones reach half the longest skid plus this beyond the passage.
+    pad_m: float = 0.3
+    #: Bottlenecks are found on the map coarsened to this resolution.
+    resolution_m: float = 0.1
+    #: A skid asks for a zone its path enters within this distance.
+    lookahead_m: float = 4.0
+    #: Skids from the same side follow each other into a zone this long apart (0: a zone is
+    #: a one-way lane; only skids coming the other way wait). Measured on the suite's
+    #: elevator: 0 s 103 s, 2 s 72 s, 3 s 70 s, 4 s 86 s to park; on generated doors the
+    #: results scatter (a 4-skid door parks at 2 and 4 s, not at 3 s): a jam at a door is
+    #: sensitive to who arrives first.
+    convoy_gap_s: float = 2.0
+    #: A skid without a grant stops this far short of the zone (its command checked this
+    #: far ahead in time).
+    gap_m: float = 0.3
+    check_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check(self, {"lane_clearance_m": ">=0", "pad_m": ">=0", "resolution_m": ">0"})
+        _check(self, {"lookahead_m": ">0", "convoy_gap_s": ">=0", "gap_m": ">=0"})
+        _check(self, {"check_s": ">0"})
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"TrafficParams.enabled must be true or false (got {self.enabled!r})")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -368,6 +491,9 @@ class NavParams:
     avoidance: str = "monitor"
     follower: FollowerParams = field(default_factory=FollowerParams)
     planner: PlannerParams = field(default_factory=PlannerParams)
+    fleet_map: FleetMapParams = field(default_factory=FleetMapParams)
+    manoeuvre: ManoeuvreParams = field(default_factory=ManoeuvreParams)
+    traffic: TrafficParams = field(default_factory=TrafficParams)
     apf: FieldParams = field(default_factory=FieldParams)
     docking: DockingParams = field(default_factory=DockingParams)
     monitor: MonitorParams = field(default_factory=MonitorParams)

@@ -6,8 +6,15 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpark.control.base import ControlView
-from swarmpark.control.nav.follower import PathFollower, PathState
-from swarmpark.control.nav.params import PlannerParams
+from swarmpark.control.nav.fleetmap import (
+    FleetState,
+    blocking,
+    fleet_costmap,
+    points_in_rects,
+    run_extra,
+)
+from swarmpark.control.nav.follower import PathFollower, PathState, point_at
+from swarmpark.control.nav.params import FleetMapParams, PlannerParams
 from swarmpark.core.geometry import Footprint
 from swarmpark.plan.grid import Costmap, build_costmap, path_length, paths_from, shortcut
 
@@ -15,12 +22,15 @@ __all__ = ["Planner"]
 
 
 class Planner:
-    """Plans when a goal changes, and again every ``replan_period_s`` after a failure.
+    """Plans when a goal changes, again every ``replan_period_s`` after a failure, and (given
+    the fleet) on the fleet layers, repaired when blocked or stuck (:mod:`.fleetmap`).
 
     Parameters
     ----------
     params
         :class:`~swarmpark.control.nav.params.PlannerParams`.
+    fleet_params
+        :class:`~swarmpark.control.nav.params.FleetMapParams` (fleet layers, repairs).
     staging_m
         The path is planned to a staging point this far before the goal on its axis (the
         docking run-up), and the goal appended.
@@ -29,8 +39,17 @@ class Planner:
         takes over there).
     """
 
-    def __init__(self, params: PlannerParams, *, staging_m: float, direct_within_m: float):
+    def __init__(
+        self,
+        params: PlannerParams,
+        *,
+        staging_m: float,
+        direct_within_m: float,
+        fleet_params: FleetMapParams | None = None,
+    ):
         self.params = params
+        self.fleet_params = FleetMapParams() if fleet_params is None else fleet_params
+        self._parked: np.ndarray | None = None  # the parked skids of the last tick
         self.staging_m = staging_m
         self.direct_within_m = direct_within_m
         # Inflated costmaps per footprint, for the grid they were built on (held, so a new
@@ -49,8 +68,15 @@ class Planner:
             )
         return self._costmaps[key]
 
-    def update(self, view: ControlView, states: list[PathState], follower: PathFollower) -> None:
-        """Plan for the active robots whose goal changed or whose failed plan is due."""
+    def update(
+        self,
+        view: ControlView,
+        states: list[PathState],
+        follower: PathFollower,
+        fleet: FleetState | None = None,
+    ) -> None:
+        """Plan for the active robots whose goal changed, whose failed plan is due, or whose
+        plan needs a repair (:mod:`.fleetmap`; only with ``fleet``)."""
         p = self.params
         active = np.flatnonzero(view.active)
         # Stale plans (for another goal) found for the whole fleet at once; failed plans are
@@ -61,6 +87,15 @@ class Planner:
             for i, again in zip(active.tolist(), redo.tolist(), strict=True)
             if again or (states[i].failed and view.t - states[i].planned_t >= p.replan_period_s)
         ]
+        # Repairs (only with the fleet known): on the fleet layers. A new goal's first plan and
+        # the retries of a failed one are on the static map, as the skid will find the fleet
+        # moved by the time it gets there.
+        repair: set[int] = set()
+        stuck: set[int] = set()
+        if fleet is not None:
+            stuck = self._stuck(view, states, follower, fleet)
+            repair = (self._blocked(view, states, follower, fleet) | stuck) - set(wanted)
+            wanted = sorted(set(wanted) | repair)
         # A bounded number of plans per tick (longest waiting first), so a park command for a
         # hundred skids does not stall the loop; the others wait for their path.
         wanted.sort(key=lambda i: (states[i].planned_t, i))
@@ -68,40 +103,131 @@ class Planner:
             st = states[i]
             goal = view.goals[i]
             cm = self.costmap(view, view.footprints[i])
-            path = self.plan(cm, view.poses[i], goal)
+            path = None
+            if i in repair:
+                # A blocked plan goes round the skids parked on it; a stuck skid's also round
+                # the skids standing still and, if it can, off the spots still to be filled.
+                parked = fleet.parked | (fleet.still if i in stuck else False)
+                bound = fleet.bound if i in stuck else np.zeros_like(fleet.bound)
+                fcm = fleet_costmap(cm, view, i, parked, bound, self.fleet_params)
+                extra = run_extra(view, i, parked, bound, self.fleet_params)
+                path = self.plan(fcm, view.poses[i], goal, extra)
+            if path is None:  # no way around the fleet: the static map's (avoidance copes)
+                path = self.plan(cm, view.poses[i], goal)
             st.path, st.path_goal, st.planned_t = path, goal.copy(), view.t
+            st.best_left_m, st.best_t = np.inf, view.t
             st.failed = path is None
             if path is not None:
                 st.reverse = follower.choose_end(view, i, path)
 
-    def plan(self, cm: Costmap, pose: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+    def _remaining(
+        self, view: ControlView, idx: np.ndarray, follower: PathFollower
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Robots of ``idx`` with a usable path, and the path length left to each goal."""
+        pk = follower.packed
+        rows = idx[pk.nseg[idx] > 0]
+        if not len(rows):
+            return rows, np.zeros(0)
+        _, s_here = pk.project(rows, view.poses[rows, :2])
+        return rows, pk.cum[rows, pk.nseg[rows]] - s_here
+
+    def _blocked(
+        self, view: ControlView, states: list[PathState], follower: PathFollower, fleet
+    ) -> set[int]:
+        """Robots whose path runs into a skid that parked since the last tick."""
+        prev = self._parked
+        self._parked = fleet.parked.copy()
+        if prev is None or len(prev) != len(fleet.parked):
+            return set()
+        new = fleet.parked & ~prev
+        if not new.any():
+            return set()
+        idx = np.flatnonzero(view.active & fleet.bound & ~fleet.parked)
+        rows, left = self._remaining(view, idx, follower)
+        out: set[int] = set()
+        step = self.params.staging_check_points
+        for i, left_m in zip(rows.tolist(), left.tolist(), strict=True):
+            st = states[i]
+            if st.path is None or not st.is_for(view.goals[i]):
+                continue
+            block = blocking(view, i, new)
+            if not block.any():
+                continue
+            geom = st.geometry()
+            s = np.arange(geom.cum[-1] - left_m, geom.cum[-1], self.staging_m / step)
+            pts = np.array([point_at(st.path, geom.cum, v)[0] for v in s]).reshape(-1, 2)
+            r_in = view.footprints[i].width_m / 2
+            js = np.flatnonzero(block)
+            fps = [view.footprints[j] for j in js]
+            if points_in_rects(pts, view.poses[js], fps, r_in - 1e-3).any():
+                out.add(i)
+        return out
+
+    def _stuck(
+        self, view: ControlView, states: list[PathState], follower: PathFollower, fleet
+    ) -> set[int]:
+        """Robots that have made no progress along their path for ``stuck_s`` (and are not
+        yet where the docking manoeuvre takes over)."""
+        fp = self.fleet_params
+        idx = np.flatnonzero(view.active & fleet.bound & ~fleet.parked)
+        rows, left = self._remaining(view, idx, follower)
+        out: set[int] = set()
+        for i, left_m in zip(rows.tolist(), left.tolist(), strict=True):
+            st = states[i]
+            if fleet.waiting[i]:  # waiting on purpose: the clock stops
+                st.best_left_m, st.best_t = left_m, view.t
+            elif left_m < st.best_left_m - fp.stuck_progress_m:
+                st.best_left_m, st.best_t = left_m, view.t
+            elif (
+                view.t - st.best_t >= fp.stuck_s
+                and view.t - st.planned_t >= fp.stuck_s
+                and left_m > self.direct_within_m
+            ):
+                out.add(i)
+        return out
+
+    def plan(
+        self, cm: Costmap, pose: np.ndarray, goal: np.ndarray, run_extra=None
+    ) -> np.ndarray | None:
         """A path that ends with a straight run along the goal's axis.
 
         The path is planned to a staging point ``staging_m`` before the goal on its axis
-        (behind it, to drive in forwards, or in front of it, to back in: whichever plans
-        shorter) and the goal is appended, so the skid arrives aligned. Falls back to a
-        direct path when neither staging point can be reached or the skid is already close.
+        (behind it, to drive in forwards, or in front of it, to back in: whichever is shorter,
+        or on the fleet layers costs less, the run included) and the goal is appended, so the skid arrives aligned. Falls
+        back to a direct path when neither staging point can be reached or the skid is
+        already close. ``run_extra(points)``: the extra cost per metre the fleet layers add
+        along a run (``inf``: blocked by a parked skid).
         """
         axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
         stages = [goal[:2] + side * self.staging_m * axis for side in (-1.0, 1.0)]
         # One Dijkstra run serves the direct path and both staging points.
-        direct, *heads = paths_from(cm, pose[:2], np.vstack([goal[:2], *stages]))
+        costs: list[float] = []
+        direct, *heads = paths_from(cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs)
         if direct is not None:
             direct = shortcut(direct, cm.cost, cm.grid)
         if direct is None or np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
             return direct
-        best = None
-        for stage, head in zip(stages, heads, strict=True):
-            if head is None or not self._run_free(cm, goal, stage):
+        best, best_cost = None, np.inf
+        for stage, head, c in zip(stages, heads, costs[1:], strict=True):
+            run = self._run_cost(cm, goal, stage, run_extra)
+            if head is None or not np.isfinite(run):
                 continue
             cand = np.vstack([shortcut(head, cm.cost, cm.grid), goal[:2][None]])
-            if best is None or path_length(cand) < path_length(best):
-                best = cand
+            # On the static map the shorter path wins; on the fleet layers the cheaper one (a
+            # path through the spots of skids still on their way costs more than its length).
+            total = path_length(cand) if run_extra is None else c + run
+            if total < best_cost:
+                best, best_cost = cand, total
         return best if best is not None else direct
 
-    def _run_free(self, cm: Costmap, goal: np.ndarray, stage: np.ndarray) -> bool:
-        """Whether the straight run from the staging point to the goal is free."""
+    def _run_cost(self, cm: Costmap, goal: np.ndarray, stage: np.ndarray, run_extra) -> float:
+        """Cost of the straight run from the staging point to the goal: its length, times
+        ``1 +`` what ``run_extra`` adds along it (the fleet layers; ``inf`` if blocked), or
+        ``inf`` if a wall is in the way."""
         n = self.params.staging_check_points
         run = goal[:2][None] + np.linspace(0, 1, n)[:, None] * (stage - goal[:2])[None]
         rc = cm.grid.world_to_cell(run)
-        return bool(cm.grid.in_bounds(rc).all() and not cm.grid.occupied[rc[:, 0], rc[:, 1]].any())
+        if not cm.grid.in_bounds(rc).all() or cm.grid.occupied[rc[:, 0], rc[:, 1]].any():
+            return np.inf
+        extra = 0.0 if run_extra is None else run_extra(run[1:])
+        return float(np.linalg.norm(stage - goal[:2]) * (1.0 + extra))

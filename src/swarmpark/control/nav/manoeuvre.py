@@ -1,0 +1,245 @@
+"""Manoeuvres out of a dead end: when a skid has made no progress towards its goal for a
+while, plan a manoeuvre for its rectangle (turns on the spot, forward and reverse runs:
+:func:`swarmpark.plan.lattice.plan_manoeuvre`) around the walls and the other skids where they
+stand, and drive it segment by segment.
+
+The potential field follows a path planned for a disc; into a spot that can only be entered
+at one heading (a pillar on one side, a parked neighbour on the other) or through a door
+lengthwise it can circle for ever (found on generated sites: a skid 1.5 m and 70 deg off its
+goal for 80 s). The manoeuvre takes over only then, so the skids that park without it are
+driven exactly as before. Its commands still go through the collision monitor; a manoeuvre
+held up by the monitor for ``blocked_s`` is dropped and planned again later.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from swarmpark.control.base import ControlView
+from swarmpark.control.nav.params import ManoeuvreParams
+from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.progress import NAV_HEADING_LEVER_M, remaining_m
+from swarmpark.plan.lattice import plan_manoeuvre, rect_mask
+
+__all__ = ["ManoeuvrePlanner", "ManoeuvreState"]
+
+
+@dataclass
+class ManoeuvreState:
+    """One skid's manoeuvre: its segments and the current one, the progress watch that
+    starts it, and when it may be tried again."""
+
+    segments: list | None = None
+    seg: int = 0
+    #: When the current segment must be done by (a watchdog: dropped after that).
+    seg_deadline: float = np.inf
+    best_left_m: float = np.inf
+    best_t: float = 0.0
+    #: Where the skid stood when the progress watch last restarted.
+    anchor: np.ndarray | None = field(default=None, repr=False)
+    retry_t: float = -np.inf
+    blocked_s: float = 0.0
+    goal: np.ndarray | None = field(default=None, repr=False)
+    #: How many manoeuvres were planned and how many found no way (for the run report).
+    planned: int = 0
+    failed: int = 0
+
+    def running(self) -> bool:
+        return self.segments is not None
+
+    def stop(self, t: float, retry_s: float) -> None:
+        self.segments, self.seg, self.blocked_s = None, 0, 0.0
+        self.seg_deadline = np.inf
+        self.retry_t = t + retry_s
+        self.best_left_m, self.best_t = np.inf, t
+
+
+class ManoeuvrePlanner:
+    """Starts, drives and ends manoeuvres (see the module docstring).
+
+    Parameters
+    ----------
+    params
+        :class:`~swarmpark.control.nav.params.ManoeuvreParams`.
+    """
+
+    def __init__(self, params: ManoeuvreParams) -> None:
+        self.params = params
+
+    def step(
+        self,
+        view: ControlView,
+        idx: np.ndarray,
+        raw: np.ndarray,
+        states: list[ManoeuvreState],
+        eligible: np.ndarray,
+    ) -> np.ndarray:
+        """Replace the commands ``raw`` (rows of ``idx``) of the skids in a manoeuvre; start
+        one for an ``eligible`` skid that made no progress for ``stuck_s``. Returns which rows
+        are manoeuvring."""
+        p = self.params
+        out = np.zeros(len(idx), dtype=bool)
+        pose, goal = view.poses[idx], view.goals[idx]
+        left = remaining_m(
+            np.linalg.norm(goal[:, :2] - pose[:, :2], axis=1),
+            np.abs(wrap_angle(goal[:, 2] - pose[:, 2])),
+            NAV_HEADING_LEVER_M,
+        )
+        for k, i in enumerate(idx.tolist()):
+            st = states[i]
+            if st.running() and (
+                not eligible[k] or st.goal is None or np.any(st.goal != view.goals[i])
+            ):
+                st.stop(view.t, 0.0)
+            if not eligible[k]:
+                st.best_left_m, st.best_t = np.inf, view.t
+                continue
+            # Progress, or travel: a skid driving round an obstacle away from its goal is
+            # not stuck, one loitering within roam_m of where it last got closer is.
+            roamed = st.anchor is not None and np.hypot(*(pose[k, :2] - st.anchor)) > p.roam_m
+            if left[k] < st.best_left_m - p.progress_m or roamed or st.anchor is None:
+                st.best_left_m, st.best_t = left[k], view.t
+                st.anchor = pose[k, :2].copy()
+            if not st.running():
+                if view.t - st.best_t < p.stuck_s or view.t < st.retry_t:
+                    continue
+                self._start(view, i, st)
+                if not st.running():
+                    continue
+            cmd = self._drive(view, i, st)
+            if cmd is None:
+                continue
+            raw[k] = cmd
+            out[k] = True
+        return out
+
+    def observe(self, view: ControlView, idx: np.ndarray, states, raw, safe) -> None:
+        """After the monitor: a manoeuvre it held still for ``blocked_s`` is dropped."""
+        p = self.params
+        for k, i in enumerate(idx.tolist()):
+            st = states[i]
+            if not st.running():
+                continue
+            held = np.any(np.abs(raw[k]) > 1e-6) and np.all(np.abs(safe[k]) < 1e-6)
+            st.blocked_s = st.blocked_s + view.dt if held else 0.0
+            if st.blocked_s >= p.blocked_s:
+                st.stop(view.t, p.retry_s)
+
+    # ------------------------------------------------------------------ planning
+
+    def _window(self, view: ControlView, i: int):
+        """The occupancy of the window around skid ``i`` and its goal: the map, the other
+        skids where they stand (grown by ``skid_margin_m``) and the people."""
+        p = self.params
+        grid = view.grid
+        res = grid.resolution_m
+        pts = np.vstack([view.poses[i, :2], view.goals[i, :2]])
+        lo = pts.min(axis=0) - p.window_margin_m
+        hi = pts.max(axis=0) + p.window_margin_m
+        if np.any(hi - lo > p.max_window_m):
+            return None
+        h, w = grid.shape
+        c0 = max(int(np.floor((lo[0] - grid.origin[0]) / res)), 0)
+        r0 = max(int(np.floor((lo[1] - grid.origin[1]) / res)), 0)
+        c1 = min(int(np.ceil((hi[0] - grid.origin[0]) / res)), w)
+        r1 = min(int(np.ceil((hi[1] - grid.origin[1]) / res)), h)
+        if r1 - r0 < 3 or c1 - c0 < 3:
+            return None
+        occ = grid.occupied[r0:r1, c0:c1].copy()
+        origin = np.array([grid.origin[0] + c0 * res, grid.origin[1] + r0 * res])
+        for j in range(len(view.poses)):
+            if j != i:
+                self._stamp(occ, origin, res, view.poses[j], view.footprints[j])
+        for xy, rad in zip(view.people_xy, view.people_radius, strict=True):
+            rr, cc = np.mgrid[0 : occ.shape[0], 0 : occ.shape[1]]
+            d = np.hypot(origin[0] + (cc + 0.5) * res - xy[0], origin[1] + (rr + 0.5) * res - xy[1])
+            occ |= d <= rad + p.person_margin_m
+        return occ, origin, res
+
+    def _stamp(self, occ, origin, res, pose, fp) -> None:
+        """Mark skid footprint ``fp`` at ``pose`` (grown by the skid margin) in ``occ``."""
+        mask = rect_mask(fp, float(pose[2]), res, self.params.skid_margin_m)
+        r = mask.shape[0] // 2
+        rc = int(np.floor((pose[1] - origin[1]) / res))
+        cc = int(np.floor((pose[0] - origin[0]) / res))
+        h, w = occ.shape
+        r0, r1 = max(rc - r, 0), min(rc + r + 1, h)
+        c0, c1 = max(cc - r, 0), min(cc + r + 1, w)
+        if r0 >= r1 or c0 >= c1:
+            return
+        occ[r0:r1, c0:c1] |= mask[r0 - (rc - r) : r1 - (rc - r), c0 - (cc - r) : c1 - (cc - r)]
+
+    def _start(self, view: ControlView, i: int, st: ManoeuvreState) -> None:
+        p = self.params
+        win = self._window(view, i)
+        st.planned += 1
+        plan = None
+        if win is not None:
+            occ, origin, res = win
+            plan = plan_manoeuvre(
+                occ,
+                origin,
+                res,
+                view.footprints[i],
+                view.poses[i],
+                view.goals[i],
+                speed_mps=float(view.max_speed[i]) * p.speed_share,
+                yaw_rate_radps=float(view.max_yaw_rate[i]) * p.speed_share,
+                grow_m=p.grow_m,
+                reverse_cost=p.reverse_cost,
+                budget=p.budget,
+            )
+        if plan is None or len(plan.poses) < 2:
+            st.failed += 1
+            st.stop(view.t, p.retry_s)
+            return
+        st.segments, st.seg, st.blocked_s = plan.segments(), 0, 0.0
+        st.seg_deadline = np.inf
+        st.goal = view.goals[i].copy()
+
+    # ------------------------------------------------------------------ driving
+
+    def _drive(self, view: ControlView, i: int, st: ManoeuvreState) -> np.ndarray | None:
+        """The command along the current segment; moves to the next one when it is done and
+        ends the manoeuvre after the last (None: ended, the docking manoeuvre takes over)."""
+        p = self.params
+        pose = view.poses[i]
+        v_max = float(view.max_speed[i]) * p.speed_share
+        w_max = float(view.max_yaw_rate[i]) * p.speed_share
+        if view.t > st.seg_deadline:
+            st.stop(view.t, p.retry_s)  # the segment takes far too long: plan again later
+            return None
+        while st.seg < len(st.segments):
+            kind, a, b = st.segments[st.seg]
+            if not np.isfinite(st.seg_deadline):
+                expect = (
+                    abs(wrap_angle(b[2] - a[2])) / w_max
+                    if kind == "turn"
+                    else float(np.hypot(*(b[:2] - a[:2]))) / v_max
+                )
+                st.seg_deadline = view.t + p.timeout_factor * expect + p.timeout_s
+            if kind == "turn":
+                err = wrap_angle(b[2] - pose[2])
+                if abs(err) > p.done_rad:
+                    w = np.clip(p.k_yaw * err, -w_max, w_max)
+                    w = np.sign(w) * max(abs(w), p.min_yaw_rate_radps)
+                    return np.array([0.0, w])
+            else:
+                d = 1.0 if kind == "forward" else -1.0
+                u = np.array([np.cos(b[2]), np.sin(b[2])])
+                along = float(np.dot(b[:2] - pose[:2], u)) * d
+                if along > p.done_m:
+                    rel = pose[:2] - a[:2]
+                    lateral = float(u[0] * rel[1] - u[1] * rel[0])  # left of the run: > 0
+                    aim = b[2] - d * np.arctan(p.k_lateral * lateral)
+                    err = wrap_angle(aim - pose[2])
+                    speed = np.clip(p.k_speed * along, p.min_speed_mps, v_max)
+                    speed *= max(np.cos(err), 0.0)
+                    return np.array([d * speed, np.clip(p.k_yaw * err, -w_max, w_max)])
+            st.seg += 1
+            st.seg_deadline = np.inf
+        st.segments, st.seg = None, 0
+        st.best_left_m, st.best_t = np.inf, view.t
+        return None

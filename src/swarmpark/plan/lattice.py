@@ -1,0 +1,259 @@
+"""Manoeuvres for a rectangular skid that can turn in place: A* on a state lattice in (x, y,
+heading), with forward and reverse moves and turns on the spot, checked against the
+rectangle itself rather than a disc.
+
+The grid planner (:mod:`.grid`) plans for a disc as wide as the skid. That is right in the
+open and wrong in tight spots: a spot between a pillar and a parked neighbour can only be
+entered at one heading, by a turn on the spot or by backing in, and a door is passable only
+lengthwise. This module plans such manoeuvres, in the manner of Navigation2's Smac State
+Lattice planner (Macenski et al., "Open-source, cost-aware kinematically feasible planning for
+mobile and surface robotics", 2024), on a lattice made for a skid that turns in place:
+
+- **states**: cell centres of a window of the map times the 16 *grid headings* (the
+  directions of the cell offsets (1, 0), (2, 1), (1, 1), (1, 2), ...), so a straight move
+  along a heading lands exactly on a cell centre;
+- **moves**: one step forwards or backwards along the heading (reverse costs more), or a turn
+  on the spot to a neighbouring heading; costs are seconds at the skid's top speed and top
+  yaw rate;
+- **collision**: for every heading (and every half-way heading, for turns) the set of cells a
+  pose is free at is found at once by an FFT convolution of the obstacles with the
+  footprint's cell mask (footprint grown by half a cell diagonal and a margin: conservative);
+- **search**: A* with the travel time of the obstacle-aware 2-D distance (the footprint's
+  widest free heading) as the heuristic, compiled with numba; bounded by an expansion budget.
+
+Why not OMPL's Reeds–Shepp spaces: Reeds–Shepp curves have a minimum turning radius, which
+a skid that turns on the spot does not; OMPL's planners sample (deterministic only with a
+fixed seed, and never complete) and call back into Python for every validity check. A lattice
+for a turn-in-place skid is exact for this robot, complete over the lattice, deterministic,
+and runs in milliseconds (``swarmpark bench --only nav.manoeuvre``).
+"""
+
+from __future__ import annotations
+
+import heapq
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.signal import fftconvolve
+from skimage.graph import MCP_Geometric
+
+from swarmpark.core.geometry import Footprint
+
+__all__ = ["HEADING_STEPS", "HEADINGS", "Manoeuvre", "plan_manoeuvre", "rect_mask"]
+
+#: The 16 grid headings as cell steps (dx, dy): a straight move lands on a cell centre.
+HEADING_STEPS = np.array(
+    [
+        (1, 0), (2, 1), (1, 1), (1, 2), (0, 1), (-1, 2), (-1, 1), (-2, 1),
+        (-1, 0), (-2, -1), (-1, -1), (-1, -2), (0, -1), (1, -2), (1, -1), (2, -1),
+    ],
+    dtype=np.int64,
+)  # fmt: skip
+#: Their angles (rad).
+HEADINGS = np.arctan2(HEADING_STEPS[:, 1], HEADING_STEPS[:, 0]).astype(float)
+_K = len(HEADINGS)
+
+
+@dataclass(frozen=True)
+class Manoeuvre:
+    """A planned manoeuvre: pivot poses ``(M, 3)`` (world, rad) one lattice move apart, the
+    move that reached each (``0`` start, ``1`` forwards, ``-1`` backwards, ``2`` turn on the
+    spot), its duration estimate (s) and how many states the search expanded."""
+
+    poses: np.ndarray
+    moves: np.ndarray
+    cost_s: float
+    expanded: int
+    goal: np.ndarray | None = None
+
+    def segments(self) -> list[tuple[str, np.ndarray, np.ndarray]]:
+        """Runs of the same move: ``("turn", pose_from, pose_to)``, ``("forward", ...)`` or
+        ``("reverse", ...)``, straight runs merged while the heading stays the same; then a
+        turn to the exact goal heading and a short run to the exact goal position."""
+        out: list[tuple[str, np.ndarray, np.ndarray]] = []
+        names = {1: "forward", -1: "reverse", 2: "turn"}
+        for m in range(1, len(self.poses)):
+            kind = names[int(self.moves[m])]
+            if (
+                out
+                and out[-1][0] == kind
+                and (kind == "turn" or abs(out[-1][2][2] - self.poses[m][2]) < 1e-9)
+            ):
+                out[-1] = (kind, out[-1][1], self.poses[m])
+            else:
+                out.append((kind, self.poses[m - 1], self.poses[m]))
+        if self.goal is not None:
+            last = self.poses[-1]
+            turned = np.array([last[0], last[1], self.goal[2]])
+            out.append(("turn", last, turned))
+            ahead = np.dot(self.goal[:2] - last[:2], [np.cos(self.goal[2]), np.sin(self.goal[2])])
+            out.append(("forward" if ahead >= 0 else "reverse", turned, np.asarray(self.goal)))
+        return out
+
+
+def rect_mask(fp: Footprint, heading: float, res: float, grow_m: float) -> np.ndarray:
+    """Cells (a square mask centred on the pivot's cell) whose centres lie in footprint ``fp``
+    at ``heading``, grown by ``grow_m``."""
+    reach = fp.reach_m + grow_m
+    r = int(np.ceil(reach / res)) + 1
+    off = np.arange(-r, r + 1) * res
+    dx, dy = np.meshgrid(off, off)  # rows are y, columns x
+    c, s = np.cos(heading), np.sin(heading)
+    along = dx * c + dy * s
+    across = -dx * s + dy * c
+    eps = 1e-9  # cell centres on the outline count as inside
+    return (
+        (along >= -fp.pivot - grow_m - eps)
+        & (along <= fp.length_m - fp.pivot + grow_m + eps)
+        & (np.abs(across) <= fp.width_m / 2 + grow_m + eps)
+    )
+
+
+def _free_at(occ: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Where the pivot may stand with ``mask`` (no occupied cell under it): a correlation of
+    ``occ`` with ``mask``, by FFT."""
+    hit = fftconvolve(occ.astype(float), mask[::-1, ::-1].astype(float), mode="same")
+    return hit < 0.5
+
+
+@njit(cache=True)
+def _astar(free, turn_free, steps, step_len, start, goal, h, v, w_rate, rev_cost, budget):
+    """A* over (heading, row, col); ``free[k]``: pose free at heading k, ``turn_free[k]``:
+    turning between k and k+1 free. Returns the parent array, the move array, the goal's
+    cost and the number of expansions (cost inf if not found)."""
+    n_k, n_r, n_c = free.shape
+    size = n_k * n_r * n_c
+    g = np.full(size, np.inf)
+    parent = np.full(size, -1, np.int64)
+    move = np.zeros(size, np.int8)
+    closed = np.zeros(size, np.bool_)
+    k0, r0, c0 = start
+    s0 = (k0 * n_r + r0) * n_c + c0
+    g[s0] = 0.0
+    heap = [(h[r0, c0], s0)]
+    heapq.heapify(heap)
+    turn_s = (2.0 * np.pi / n_k) / w_rate
+    expanded = 0
+    while len(heap) > 0 and expanded < budget:
+        _, s = heapq.heappop(heap)
+        if closed[s]:
+            continue
+        closed[s] = True
+        expanded += 1
+        k = s // (n_r * n_c)
+        rc = s % (n_r * n_c)
+        r = rc // n_c
+        c = rc % n_c
+        if k == goal[0] and r == goal[1] and c == goal[2]:
+            return parent, move, s, g[s], expanded
+        for m in range(4):
+            if m < 2:
+                d = 1 if m == 0 else -1
+                nr = r + d * steps[k, 1]
+                nc = c + d * steps[k, 0]
+                nk = k
+                if nr < 0 or nc < 0 or nr >= n_r or nc >= n_c or not free[nk, nr, nc]:
+                    continue
+                cost = step_len[k] / v * (1.0 if d == 1 else rev_cost)
+                mv = d
+            else:
+                nk = (k + (1 if m == 2 else -1)) % n_k
+                nr, nc = r, c
+                lo = k if m == 2 else nk
+                if not (free[nk, nr, nc] and turn_free[lo, nr, nc]):
+                    continue
+                cost = turn_s
+                mv = 2
+            ns = (nk * n_r + nr) * n_c + nc
+            if closed[ns]:
+                continue
+            ng = g[s] + cost
+            if ng < g[ns]:
+                g[ns] = ng
+                parent[ns] = s
+                move[ns] = mv
+                heapq.heappush(heap, (ng + h[nr, nc], ns))
+    return parent, move, -1, np.inf, expanded
+
+
+def plan_manoeuvre(
+    occ: np.ndarray,
+    origin: np.ndarray,
+    res: float,
+    fp: Footprint,
+    start: np.ndarray,
+    goal: np.ndarray,
+    *,
+    speed_mps: float,
+    yaw_rate_radps: float,
+    grow_m: float = 0.02,
+    reverse_cost: float = 1.5,
+    budget: int = 400_000,
+) -> Manoeuvre | None:
+    """A manoeuvre from pose ``start`` to pose ``goal`` (pivot x, y, heading rad, world) in the
+    window ``occ`` (``(H, W)`` bool, True occupied; cell ``(r, c)`` centred at ``origin +
+    ((c + 0.5) res, (r + 0.5) res)``), or None if there is none within the budget.
+
+    The start and goal snap to the nearest cell centre and grid heading; the manoeuvre ends
+    at the goal's cell and grid heading (:meth:`Manoeuvre.segments` adds the last turn and
+    run to the exact goal). A
+    start pose that is not free (the skid already touches its margin) is searched from anyway.
+    """
+    occ = np.asarray(occ, bool)
+    n_r, n_c = occ.shape
+    grow = grow_m + res * np.sqrt(0.5)
+    free = np.empty((_K, n_r, n_c), bool)
+    turn_free = np.empty((_K, n_r, n_c), bool)
+    for k in range(_K):
+        free[k] = _free_at(occ, rect_mask(fp, HEADINGS[k], res, grow))
+    for k in range(_K):
+        nxt = HEADINGS[(k + 1) % _K]
+        mid = np.arctan2(np.sin(HEADINGS[k]) + np.sin(nxt), np.cos(HEADINGS[k]) + np.cos(nxt))
+        turn_free[k] = _free_at(occ, rect_mask(fp, mid, res, grow))
+
+    def snap(pose):
+        c = int(np.floor((pose[0] - origin[0]) / res))
+        r = int(np.floor((pose[1] - origin[1]) / res))
+        dk = np.abs(np.angle(np.exp(1j * (HEADINGS - pose[2]))))
+        return int(np.argmin(dk)), r, c
+
+    s, g = snap(start), snap(goal)
+    for _k, r, c in (s, g):
+        if not (0 <= r < n_r and 0 <= c < n_c):
+            return None
+    free[s] = True  # leave from where it stands
+    if not free[g]:
+        return None
+    # Heuristic: travel time of the 2-D distance to the goal through cells free at some heading.
+    passable = np.where(free.any(axis=0), 1.0, np.inf)
+    passable[s[1], s[2]] = 1.0
+    cum, _ = MCP_Geometric(passable, fully_connected=True).find_costs([(g[1], g[2])])
+    h = np.where(np.isfinite(cum), cum * res / speed_mps, 1e9)
+    step_len = np.linalg.norm(HEADING_STEPS, axis=1) * res
+    parent, move, end, cost, expanded = _astar(
+        free,
+        turn_free,
+        HEADING_STEPS,
+        step_len,
+        np.array(s, np.int64),
+        np.array(g, np.int64),
+        h,
+        float(speed_mps),
+        float(yaw_rate_radps),
+        float(reverse_cost),
+        int(budget),
+    )
+    if end < 0:
+        return None
+    chain = [end]
+    while parent[chain[-1]] >= 0:
+        chain.append(int(parent[chain[-1]]))
+    chain.reverse()
+    st = np.array(chain)
+    k, rc = st // (n_r * n_c), st % (n_r * n_c)
+    r, c = rc // n_c, rc % n_c
+    poses = np.column_stack([origin[0] + (c + 0.5) * res, origin[1] + (r + 0.5) * res, HEADINGS[k]])
+    moves = move[st].astype(int)
+    moves[0] = 0
+    return Manoeuvre(poses, moves, float(cost), int(expanded), np.asarray(goal, float).copy())

@@ -1,0 +1,82 @@
+"""Manoeuvres for stuck skids (:mod:`swarmpark.control.nav.manoeuvre`), without a scenario."""
+
+from __future__ import annotations
+
+import numpy as np
+from navkit import advance, make_view
+
+from swarmpark.control.nav.manoeuvre import ManoeuvrePlanner, ManoeuvreState
+from swarmpark.control.nav.params import ManoeuvreParams
+
+#: A spot with a pillar just below it and a parked neighbour on its left: the straight
+#: approach from below is blocked, the way in is from the right and a turn on the spot.
+PILLAR = (4.6, 1.2, 5.4, 1.9)
+GOAL = np.array([5.0, 2.8, np.pi / 2])
+NEIGHBOUR = np.array([3.6, 2.8, np.pi / 2])
+
+
+def _drive(params, start, steps=900):
+    """Drive skid 0 from ``start`` with the manoeuvre planner alone (eligible all along)."""
+    planner = ManoeuvrePlanner(params)
+    states = [ManoeuvreState(), ManoeuvreState()]
+    view = make_view([start, NEIGHBOUR], [GOAL, NEIGHBOUR], boxes=[PILLAR], active=[True, False])
+    idx = np.array([0])
+    trace = []
+    for _ in range(steps):
+        raw = np.zeros((1, 2))
+        planner.step(view, idx, raw, states, np.array([True]))
+        cmd = np.vstack([raw, np.zeros((1, 2))])
+        trace.append((view.t, states[0].running()))
+        view = advance(view, cmd)
+    return view, states[0], trace
+
+
+def test_a_stuck_skid_manoeuvres_into_its_spot():
+    p = ManoeuvreParams()
+    view, st, trace = _drive(p, np.array([6.5, 0.8, np.pi / 2]))
+    started = [t for t, running in trace if running]
+    # Nothing happens before the skid has been without progress for stuck_s.
+    assert started and started[0] >= p.stuck_s - 1e-9
+    assert st.planned >= 1 and st.failed == 0
+    err = np.hypot(*(view.poses[0, :2] - GOAL[:2]))
+    assert err < 0.06
+    assert abs(np.angle(np.exp(1j * (view.poses[0, 2] - GOAL[2])))) < np.deg2rad(3.0)
+
+
+def test_a_manoeuvre_ends_when_the_skid_is_no_longer_eligible():
+    p = ManoeuvreParams(stuck_s=0.5)
+    planner = ManoeuvrePlanner(p)
+    states = [ManoeuvreState(), ManoeuvreState()]
+    view = make_view(
+        [[6.5, 0.8, np.pi / 2], NEIGHBOUR], [GOAL, NEIGHBOUR], boxes=[PILLAR], active=[True, False]
+    )
+    idx = np.array([0])
+    for _ in range(10):
+        planner.step(view, idx, np.zeros((1, 2)), states, np.array([True]))
+        view = advance(view, np.zeros((2, 2)))
+    assert states[0].running()
+    raw = np.array([[0.3, 0.1]])
+    out = planner.step(view, idx, raw, states, np.array([False]))  # e.g. held by the fill order
+    assert not states[0].running() and not out.any()
+    np.testing.assert_array_equal(raw, [[0.3, 0.1]])  # its command is left alone
+
+
+def test_a_manoeuvre_held_still_by_the_monitor_is_dropped_and_retried_later():
+    p = ManoeuvreParams(stuck_s=0.5, blocked_s=1.0, retry_s=2.0)
+    planner = ManoeuvrePlanner(p)
+    states = [ManoeuvreState(), ManoeuvreState()]
+    view = make_view(
+        [[6.5, 0.8, np.pi / 2], NEIGHBOUR], [GOAL, NEIGHBOUR], boxes=[PILLAR], active=[True, False]
+    )
+    idx = np.array([0])
+    t_drop = None
+    for _ in range(40):
+        raw = np.zeros((1, 2))
+        planner.step(view, idx, raw, states, np.array([True]))
+        was = states[0].running()
+        planner.observe(view, idx, states, raw, np.zeros((1, 2)))  # the monitor stops it
+        if was and not states[0].running() and t_drop is None:
+            t_drop = view.t
+        view = advance(view, np.zeros((2, 2)))
+    assert t_drop is not None
+    assert states[0].retry_t == t_drop + p.retry_s

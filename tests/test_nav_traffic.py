@@ -1,0 +1,76 @@
+"""Queues at bottlenecks (:mod:`swarmpark.control.nav.traffic`), on hand-built views."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from navkit import make_view
+
+from swarmpark.control.nav.follower import PathFollower, PathState
+from swarmpark.control.nav.params import FollowerParams, TrafficParams
+from swarmpark.control.nav.traffic import TrafficControl, TrafficState
+
+#: A wall across the 10 m x 6 m hall at x = 5 with a 1.6 m door in the middle.
+WALLS = [(4.85, 0.0, 5.15, 2.2), (4.85, 3.8, 5.15, 6.0)]
+
+
+def _setup(poses, goals):
+    view = make_view(poses, goals, boxes=WALLS)
+    paths = []
+    for p, g in zip(view.poses, view.goals, strict=True):
+        st = PathState()
+        st.path = np.array([p[:2], [5.0, 3.0], g[:2]])
+        st.path_goal = g.copy()
+        paths.append(st)
+    return view, paths
+
+
+def test_skids_from_opposite_sides_take_turns_and_the_waiting_one_stops_short():
+    # Skid 0 is nearer the door (2.6 m along its path) than skid 1 (3.2 m).
+    view, paths = _setup([[2.4, 3.0, 0.0], [8.2, 3.0, np.pi]], [[9.0, 3.0, 0.0], [1.0, 3.0, np.pi]])
+    tc = TrafficControl(TrafficParams())
+    states = [TrafficState(), TrafficState()]
+    parked = np.zeros(2, bool)
+    cmd = np.array([[0.5, 0.0], [0.5, 0.0]])
+    waiting = tc.step(
+        view, np.arange(2), cmd, paths, PathFollower(FollowerParams()), states, parked
+    )
+    assert tc.zones.count == 1
+    assert states[0].zone == 1 and states[1].zone == 0 and states[1].waiting == 1
+    assert waiting.tolist() == [False, True]
+    # The waiting skid may drive on until it is gap_m from the zone, then it stops.
+    z = tc.zones.polygons[0]
+    x = z.bounds[2] + TrafficParams().gap_m + 0.6 + 0.05  # its rear edge just outside the gap
+    near = replace(view, poses=np.array([[2.4, 3.0, 0.0], [x, 3.0, np.pi]]))
+    cmd = np.array([[0.5, 0.0], [0.5, 0.0]])
+    tc.step(near, np.arange(2), cmd, paths, PathFollower(FollowerParams()), states, parked)
+    assert cmd[1].tolist() == [0.0, 0.0] and cmd[0].tolist() == [0.5, 0.0]
+    # Once skid 0 has gone through and left the zone, skid 1 gets the door.
+    past = replace(view, poses=np.array([[9.0, 3.0, 0.0], [x, 3.0, np.pi]]))
+    cmd = np.array([[0.0, 0.0], [0.5, 0.0]])
+    tc.step(past, np.arange(2), cmd, paths, PathFollower(FollowerParams()), states, parked)
+    assert states[0].zone == 0 and states[1].zone == 1 and cmd[1, 0] == 0.5
+
+
+def test_skids_from_the_same_side_follow_in_a_convoy():
+    view, paths = _setup([[2.4, 3.0, 0.0], [1.2, 3.0, 0.0]], [[9.0, 3.0, 0.0], [8.0, 3.5, 0.0]])
+    # Without a convoy gap a zone is a one-way lane: both from the same side go at once.
+    states = [TrafficState(), TrafficState()]
+    fol = PathFollower(FollowerParams())
+    TrafficControl(TrafficParams(convoy_gap_s=0.0)).step(
+        view, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool)
+    )
+    assert states[0].zone == states[1].zone == 1
+    # With a convoy gap the second follows that much later.
+    p = TrafficParams(convoy_gap_s=2.0)
+    tc = TrafficControl(p)
+    states = [TrafficState(), TrafficState()]
+    fol = PathFollower(FollowerParams())
+    parked = np.zeros(2, bool)
+    tc.step(view, np.arange(2), np.zeros((2, 2)), paths, fol, states, parked)
+    assert states[0].zone == 1 and states[1].waiting == 1  # the second is queued behind ...
+    later = replace(view, t=p.convoy_gap_s, poses=np.array([[4.5, 3.0, 0.0], [2.4, 3.0, 0.0]]))
+    tc.step(later, np.arange(2), np.zeros((2, 2)), paths, fol, states, parked)
+    assert states[1].zone == 1  # ... and follows convoy_gap_s later, from the same side
+    assert states[0].side == states[1].side
