@@ -174,8 +174,9 @@ class Navigator:
             moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
             cmd[moving] = self._monitor(view, moving, full[moving], joint=True)
         else:
+            docked_all = [r.dock.docked for r in self.robots]  # per robot, not per row
             raw = self.give_way.step(
-                view, idx, raw, dist_goal, self._states("give_way"), docked.tolist()
+                view, idx, raw, dist_goal, self._states("give_way"), docked_all
             )
             raw[man] = mraw
             cmd[idx] = self._monitor(view, idx, raw)
