@@ -131,3 +131,9 @@ def test_cli_bad_generate_input_exits_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["run", "scenarios/hallway-fig7.yaml", "--seed", "-3"])
     assert exc.value.code == 2
+
+
+def test_a_small_l_bay_that_had_no_room_beside_its_pillars_is_drawn_without_them():
+    """Found by the property test: 2 skids, seed 32766, no feasible draw in MAX_ATTEMPTS."""
+    data = generate("l-bay", 32766, robots=2)
+    assert len(data["robots"]) == 2 and data["commands"][0]["park"]["boundary"]

@@ -80,3 +80,16 @@ def test_a_manoeuvre_held_still_by_the_monitor_is_dropped_and_retried_later():
         view = advance(view, np.zeros((2, 2)))
     assert t_drop is not None
     assert states[0].retry_t == t_drop + p.retry_s
+
+
+def test_a_wedged_skid_first_backs_straight_out():
+    """In a slot 3 cm wider than the skid on each side, no turn is possible: the manoeuvre
+    starts with a straight run out along the skid's own heading, then plans from there."""
+    slot = [(3.2, 2.0, 4.7, 2.57), (3.2, 3.43, 4.7, 4.0), (4.7, 2.0, 5.0, 4.0)]
+    view = make_view([[3.6, 3.0, 0.0]], [[1.5, 1.2, np.pi / 2]], boxes=slot)
+    planner = ManoeuvrePlanner(ManoeuvreParams())
+    occ, origin, res = planner._window(view, 0)
+    segments = planner._plan(view, 0, occ, origin, res)
+    assert segments and segments[0][0] == "reverse"
+    out = segments[0][2]
+    assert out[0] < 3.2 - 0.6 and abs(out[1] - 3.0) < 1e-9  # clear of the slot, same line

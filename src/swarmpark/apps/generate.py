@@ -47,6 +47,8 @@ FOOTPRINTS = ((1.2, 0.8), (1.0, 0.7), (1.4, 0.9))
 WALL_T = 0.3  # wall thickness, as in the hand-written scenarios
 RESOLUTION_M = 0.1  # generated sites are large; 10 cm cells keep planning cheap
 MAX_ATTEMPTS = 8
+#: Then this many more draws, leaving out what may not fit (an L-bay's pillars).
+LAST_RESORT_ATTEMPTS = 4
 #: Kinds whose fleet may mix footprints (pass-through keeps the paper's uniform block).
 MIXED_KINDS = ("hangar", "elevator", "door", "corridor", "l-bay", "people", "open-deck")
 
@@ -67,6 +69,8 @@ class _Ctx:
     slack: float
     pitch: float = 0.0  # start grid spacing: circumscribed diameter + a gap
     gap: float = 0.0
+    #: The draws after MAX_ATTEMPTS failed ones: the builder leaves out what may not fit.
+    last_resort: bool = False
 
     def __post_init__(self) -> None:
         r = max(math.hypot(length / 2, width / 2) for length, width in self.fps)
@@ -258,7 +262,9 @@ def _l_bay(ctx: _Ctx) -> _Site:
     boundary = [[_r(x), _r(y)] for x, y in pts]
     walls = _outer(w, h)
     poly = Polygon(boundary).buffer(-1.0)
-    for _ in range(int(rng.integers(1, 4))):
+    # A small fleet's L can have no room beside its pillars (l-bay seed 32766, 2 skids).
+    pillars = 0 if ctx.last_resort else int(rng.integers(1, 4))
+    for _ in range(pillars):
         for _try in range(20):
             px, py = rng.uniform(x0, x1), rng.uniform(y0, y1)
             if poly.contains(Point(px, py)):
@@ -392,7 +398,8 @@ def generate(kind: str, seed: int, *, robots: int | None = None) -> dict:
     ------
     GenerateError
         Unknown kind, a fleet size out of range, or no feasible draw in
-        :data:`MAX_ATTEMPTS` (never seen; it would be a generator bug).
+        :data:`MAX_ATTEMPTS` draws and :data:`LAST_RESORT_ATTEMPTS` simpler ones (a
+        generator bug).
     """
     if kind not in KINDS:
         raise GenerateError(f"kind: unknown kind {kind!r} (known: {', '.join(KINDS)})")
@@ -405,10 +412,11 @@ def generate(kind: str, seed: int, *, robots: int | None = None) -> dict:
     n = int(robots) if robots is not None else int(rng.integers(MIN_ROBOTS, MAX_ROBOTS + 1))
     fps = _fleet(rng, kind, n)
     last: Exception | None = None
-    for attempt in range(MAX_ATTEMPTS):
+    for attempt in range(MAX_ATTEMPTS + LAST_RESORT_ATTEMPTS):
         margin = float(rng.uniform(0.6, 1.0) if kind == "people" else rng.uniform(0.25, 0.45))
         heading = float(rng.choice([0.0, 90.0]))
         ctx = _Ctx(rng, n, fps, margin, heading, slack=1.0 + 0.2 * attempt)
+        ctx.last_resort = attempt >= MAX_ATTEMPTS
         site = KINDS[kind](ctx)
         data = _scenario(kind, seed, ctx, site)
         try:

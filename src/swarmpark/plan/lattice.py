@@ -40,7 +40,14 @@ from skimage.graph import MCP_Geometric
 
 from swarmpark.core.geometry import Footprint
 
-__all__ = ["HEADING_STEPS", "HEADINGS", "Manoeuvre", "plan_manoeuvre", "rect_mask"]
+__all__ = [
+    "HEADING_STEPS",
+    "HEADINGS",
+    "Manoeuvre",
+    "footprint_clear",
+    "plan_manoeuvre",
+    "rect_mask",
+]
 
 #: The 16 grid headings as cell steps (dx, dy): a straight move lands on a cell centre.
 HEADING_STEPS = np.array(
@@ -66,6 +73,9 @@ class Manoeuvre:
     cost_s: float
     expanded: int
     goal: np.ndarray | None = None
+    #: Whether the start pose was clear at its grid heading (False: the skid is wedged, and
+    #: the first move may be one the collision monitor refuses).
+    start_free: bool = True
 
     def segments(self) -> list[tuple[str, np.ndarray, np.ndarray]]:
         """Runs of the same move: ``("turn", pose_from, pose_to)``, ``("forward", ...)`` or
@@ -108,6 +118,21 @@ def rect_mask(fp: Footprint, heading: float, res: float, grow_m: float) -> np.nd
         & (along <= fp.length_m - fp.pivot + grow_m + eps)
         & (np.abs(across) <= fp.width_m / 2 + grow_m + eps)
     )
+
+
+def footprint_clear(
+    occ: np.ndarray, origin: np.ndarray, res: float, fp: Footprint, pose: np.ndarray, grow_m: float
+) -> bool:
+    """Whether footprint ``fp`` at ``pose`` (any heading), grown by ``grow_m``, covers no
+    occupied cell centre of the window ``occ`` (outside the window counts as occupied)."""
+    mask = rect_mask(fp, float(pose[2]), res, grow_m)
+    r = mask.shape[0] // 2
+    rc = int(np.floor((pose[1] - origin[1]) / res))
+    cc = int(np.floor((pose[0] - origin[0]) / res))
+    h, w = occ.shape
+    if rc - r < 0 or cc - r < 0 or rc + r + 1 > h or cc + r + 1 > w:
+        return False
+    return not bool(np.any(occ[rc - r : rc + r + 1, cc - r : cc + r + 1] & mask))
 
 
 def _free_at(occ: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -222,6 +247,7 @@ def plan_manoeuvre(
     for _k, r, c in (s, g):
         if not (0 <= r < n_r and 0 <= c < n_c):
             return None
+    start_free = bool(free[s])
     free[s] = True  # leave from where it stands
     if not free[g]:
         return None
@@ -256,4 +282,5 @@ def plan_manoeuvre(
     poses = np.column_stack([origin[0] + (c + 0.5) * res, origin[1] + (r + 0.5) * res, HEADINGS[k]])
     moves = move[st].astype(int)
     moves[0] = 0
-    return Manoeuvre(poses, moves, float(cost), int(expanded), np.asarray(goal, float).copy())
+    goal = np.asarray(goal, float).copy()
+    return Manoeuvre(poses, moves, float(cost), int(expanded), goal, start_free)

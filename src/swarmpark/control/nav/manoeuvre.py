@@ -21,7 +21,7 @@ from swarmpark.control.base import ControlView
 from swarmpark.control.nav.params import ManoeuvreParams
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.progress import NAV_HEADING_LEVER_M, remaining_m
-from swarmpark.plan.lattice import plan_manoeuvre, rect_mask
+from swarmpark.plan.lattice import footprint_clear, plan_manoeuvre, rect_mask
 
 __all__ = ["ManoeuvrePlanner", "ManoeuvreState"]
 
@@ -175,29 +175,53 @@ class ManoeuvrePlanner:
         p = self.params
         win = self._window(view, i)
         st.planned += 1
-        plan = None
+        segments = None
         if win is not None:
-            occ, origin, res = win
-            plan = plan_manoeuvre(
-                occ,
-                origin,
-                res,
-                view.footprints[i],
-                view.poses[i],
-                view.goals[i],
-                speed_mps=float(view.max_speed[i]) * p.speed_share,
-                yaw_rate_radps=float(view.max_yaw_rate[i]) * p.speed_share,
-                grow_m=p.grow_m,
-                reverse_cost=p.reverse_cost,
-                budget=p.budget,
-            )
-        if plan is None or len(plan.poses) < 2:
+            segments = self._plan(view, i, *win)
+        if not segments:
             st.failed += 1
             st.stop(view.t, p.retry_s)
             return
-        st.segments, st.seg, st.blocked_s = plan.segments(), 0, 0.0
+        st.segments, st.seg, st.blocked_s = segments, 0, 0.0
         st.seg_deadline = np.inf
         st.goal = view.goals[i].copy()
+
+    def _plan(self, view: ControlView, i: int, occ, origin, res) -> list | None:
+        """The segments of a manoeuvre from where skid ``i`` stands; a wedged skid (its
+        footprint not clear at the nearest grid heading) first backs or drives straight out
+        along its own heading to the nearest clear pose (found on a generated L-bay: a skid
+        2.5 cm from a parked neighbour whose every planned first turn the monitor refused)."""
+        p = self.params
+        fp = view.footprints[i]
+        kw = {
+            "speed_mps": float(view.max_speed[i]) * p.speed_share,
+            "yaw_rate_radps": float(view.max_yaw_rate[i]) * p.speed_share,
+            "grow_m": p.grow_m,
+            "reverse_cost": p.reverse_cost,
+            "budget": p.budget,
+        }
+        pose, goal = view.poses[i], view.goals[i]
+        plan = plan_manoeuvre(occ, origin, res, fp, pose, goal, **kw)
+        if plan is not None and plan.start_free:
+            return plan.segments() if len(plan.poses) >= 2 else None
+        half = res * np.sqrt(0.5)
+        grow = p.grow_m + half
+        head = np.array([np.cos(pose[2]), np.sin(pose[2]), 0.0])
+        for d in np.arange(p.escape_step_m, p.escape_max_m + 1e-9, p.escape_step_m):
+            for sign, kind in ((-1.0, "reverse"), (1.0, "forward")):
+                out = pose + sign * d * head
+                if not footprint_clear(occ, origin, res, fp, out, grow):
+                    continue
+                # The way out is checked on the footprint shrunk by half a cell diagonal (the
+                # skid is already within its margins; the cells are coarser than that): the
+                # collision monitor guards the run itself.
+                way = [pose + sign * x * head for x in np.arange(0.05, d, 0.05)]
+                if not all(footprint_clear(occ, origin, res, fp, q, -half) for q in way):
+                    continue
+                rest = plan_manoeuvre(occ, origin, res, fp, out, goal, **kw)
+                if rest is not None and len(rest.poses) >= 2:
+                    return [(kind, pose.copy(), out), *rest.segments()]
+        return plan.segments() if plan is not None and len(plan.poses) >= 2 else None
 
     # ------------------------------------------------------------------ driving
 

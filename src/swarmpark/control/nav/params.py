@@ -166,6 +166,10 @@ class ManoeuvreParams:
     skid_margin_m: float = 0.05
     person_margin_m: float = 0.3
     grow_m: float = 0.02
+    #: A wedged skid first looks for a clear pose straight behind or ahead of it, in these
+    #: steps up to this far.
+    escape_step_m: float = 0.15
+    escape_max_m: float = 1.2
     #: Reverse moves cost this much more than forward ones; the search's expansion budget.
     reverse_cost: float = 1.5
     budget: int = 400_000
@@ -190,7 +194,7 @@ class ManoeuvreParams:
 
     def __post_init__(self) -> None:
         _check(self, {"stuck_s": ">0", "progress_m": ">0", "window_margin_m": ">0"})
-        _check(self, {"roam_m": ">0"})
+        _check(self, {"roam_m": ">0", "escape_step_m": ">0", "escape_max_m": ">=0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
         _check(self, {"grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"})
         _check(self, {"blocked_s": ">0", "retry_s": ">=0", "speed_share": "share"})
