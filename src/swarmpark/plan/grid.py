@@ -142,9 +142,13 @@ def paths_from(
             costs += [np.inf] * len(goals_xy)
         return [None] * len(goals_xy)
     mcp = MCP_Geometric(cost, fully_connected=True)
-    cum, _ = mcp.find_costs([tuple(s)])
+    # The flood stops once every goal cell is reached (the same costs and paths to them as a
+    # full flood: Dijkstra settles a cell for good when it first pops it).
+    cells = grid.world_to_cell(goals_xy)
+    ends = [tuple(g) for g in cells if grid.in_bounds(g[None])[0]]
+    cum, _ = mcp.find_costs([tuple(s)], ends or None)
     out: list[np.ndarray | None] = []
-    for g_xy, g in zip(goals_xy, grid.world_to_cell(goals_xy), strict=True):
+    for g_xy, g in zip(goals_xy, cells, strict=True):
         if not grid.in_bounds(g[None])[0] or not np.isfinite(cum[tuple(g)]):
             out.append(None)
             if costs is not None:
