@@ -9,7 +9,28 @@ from swarmpark.control.base import ControlView
 from swarmpark.control.nav.params import HoldParams
 from swarmpark.core.geometry import footprint_corners
 
-__all__ = ["hold_outside"]
+__all__ = ["hold_outside", "stop_short"]
+
+
+def stop_short(
+    view: ControlView, i: int, cmd: np.ndarray, zone, gap_m: float, lookahead_s: float
+) -> bool:
+    """Stop skid ``i`` (in place on ``cmd``, rows of all skids) if its command, held for
+    ``lookahead_s``, would bring it within ``gap_m`` of ``zone`` (a shapely geometry); moving
+    away stays allowed. Returns False if it is already inside the zone (never frozen there),
+    True if it is held outside."""
+    body = view.footprints[i].corners_body()[None]
+    now = shapely.Polygon(footprint_corners(view.poses[i][None], body)[0])
+    d_now = now.distance(zone)
+    if d_now <= 0.0:
+        return False
+    v, w = cmd[i]
+    th = view.poses[i, 2]
+    ahead = view.poses[i] + np.array([v * np.cos(th), v * np.sin(th), w]) * lookahead_s
+    d_next = shapely.Polygon(footprint_corners(ahead[None], body)[0]).distance(zone)
+    if d_next < gap_m and d_next <= d_now:
+        cmd[i] = 0.0
+    return True
 
 
 def hold_outside(view: ControlView, idx: np.ndarray, cmd: np.ndarray, p: HoldParams) -> None:
@@ -19,16 +40,5 @@ def hold_outside(view: ControlView, idx: np.ndarray, cmd: np.ndarray, p: HoldPar
         return
     for i in idx[view.hold[idx]]:
         zone = view.hold_zones[i] if i < len(view.hold_zones) else None
-        if zone is None:
-            continue
-        body = view.footprints[i].corners_body()[None]
-        now = shapely.Polygon(footprint_corners(view.poses[i][None], body)[0])
-        if now.intersects(zone):
-            continue  # already inside: never freeze in the middle of the formation
-        v, w = cmd[i]
-        th = view.poses[i, 2]
-        ahead = view.poses[i] + np.array([v * np.cos(th), v * np.sin(th), w]) * p.lookahead_s
-        nxt = shapely.Polygon(footprint_corners(ahead[None], body)[0])
-        d_now, d_next = now.distance(zone), nxt.distance(zone)
-        if d_next < p.gap_m and d_next <= d_now:
-            cmd[i] = 0.0
+        if zone is not None:
+            stop_short(view, i, cmd, zone, p.gap_m, p.lookahead_s)

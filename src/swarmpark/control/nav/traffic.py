@@ -24,12 +24,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 
 from swarmpark.control.base import ControlView
 from swarmpark.control.nav.follower import PathFollower, PathState
+from swarmpark.control.nav.hold import stop_short
 from swarmpark.control.nav.params import TrafficParams
-from swarmpark.core.geometry import footprint_corners
 from swarmpark.plan.bottlenecks import Bottlenecks, find_bottlenecks
 
 __all__ = ["TrafficControl", "TrafficState"]
@@ -120,7 +119,7 @@ class TrafficControl:
                 break
         for k, i in enumerate(idx.tolist()):
             zone = states[i].waiting
-            if zone and self._stop_short(view, i, cmd, z.polygons[zone - 1], p):
+            if zone and stop_short(view, i, cmd, z.polygons[zone - 1], p.gap_m, p.check_s):
                 waiting[k] = True
         return waiting
 
@@ -157,20 +156,3 @@ class TrafficControl:
         else:
             side = int(z.region_at(view.poses[i : i + 1, :2])[0])
         return int(zones[first]), float(s[first] - s_here), side
-
-    @staticmethod
-    def _stop_short(view: ControlView, i: int, cmd: np.ndarray, zone, p: TrafficParams) -> bool:
-        """Stop skid ``i`` if its command would bring it within ``gap_m`` of ``zone``; True
-        if it is held (already inside it: it drives on)."""
-        body = view.footprints[i].corners_body()[None]
-        now = shapely.Polygon(footprint_corners(view.poses[i][None], body)[0])
-        d_now = now.distance(zone)
-        if d_now <= 0.0:
-            return False
-        v, w = cmd[i]
-        th = view.poses[i, 2]
-        ahead = view.poses[i] + np.array([v * np.cos(th), v * np.sin(th), w]) * p.check_s
-        d_next = shapely.Polygon(footprint_corners(ahead[None], body)[0]).distance(zone)
-        if d_next < p.gap_m and d_next <= d_now:
-            cmd[i] = 0.0
-        return True
