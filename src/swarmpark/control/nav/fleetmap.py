@@ -73,25 +73,20 @@ def rect_cells(cm: Costmap, pose: np.ndarray, fp: Footprint, grow_m: float):
     ``grow_m`` on every side (a conservative stand-in for the Minkowski sum with a disc)."""
     grid = cm.grid
     res = grid.resolution_m
-    half_l, half_w = fp.length_m / 2 + grow_m, fp.width_m / 2 + grow_m
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    # The footprint's centre: the pivot is ``pivot`` from the rear, the centre half a length.
-    off = fp.length_m / 2 - fp.pivot
-    cx, cy = pose[0] + off * c, pose[1] + off * s
-    reach = float(np.hypot(half_l, half_w))
+    centre = pose[:2] + fp.center_offset_m * np.array([np.cos(pose[2]), np.sin(pose[2])])
+    reach = float(np.hypot(fp.length_m / 2 + grow_m, fp.width_m / 2 + grow_m))
     h, w = cm.cost.shape
     ox, oy = grid.origin
-    c0 = max(int(np.floor((cx - reach - ox) / res)), 0)
-    c1 = min(int(np.ceil((cx + reach - ox) / res)) + 1, w)
-    r0 = max(int(np.floor((cy - reach - oy) / res)), 0)
-    r1 = min(int(np.ceil((cy + reach - oy) / res)) + 1, h)
+    c0 = max(int(np.floor((centre[0] - reach - ox) / res)), 0)
+    c1 = min(int(np.ceil((centre[0] + reach - ox) / res)) + 1, w)
+    r0 = max(int(np.floor((centre[1] - reach - oy) / res)), 0)
+    r1 = min(int(np.ceil((centre[1] + reach - oy) / res)) + 1, h)
     if r0 >= r1 or c0 >= c1:
         return np.zeros(0, int), np.zeros(0, int)
     rr, cc = np.mgrid[r0:r1, c0:c1]
-    dx = ox + (cc + 0.5) * res - cx
-    dy = oy + (rr + 0.5) * res - cy
-    inside = (np.abs(dx * c + dy * s) <= half_l) & (np.abs(-dx * s + dy * c) <= half_w)
-    return rr[inside], cc[inside]
+    xy = np.column_stack([ox + (cc.ravel() + 0.5) * res, oy + (rr.ravel() + 0.5) * res])
+    inside = points_in_rects(xy, pose[None], [fp], grow_m)
+    return rr.ravel()[inside], cc.ravel()[inside]
 
 
 def points_in_rects(
@@ -102,8 +97,7 @@ def points_in_rects(
     hit = np.zeros(len(xy), dtype=bool)
     for pose, fp in zip(poses, fps, strict=True):
         c, s = np.cos(pose[2]), np.sin(pose[2])
-        off = fp.length_m / 2 - fp.pivot
-        d = xy - (pose[:2] + off * np.array([c, s]))
+        d = xy - (pose[:2] + fp.center_offset_m * np.array([c, s]))
         along, across = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
         hit |= (np.abs(along) <= fp.length_m / 2 + grow_m) & (
             np.abs(across) <= fp.width_m / 2 + grow_m
