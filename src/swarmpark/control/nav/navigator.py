@@ -142,15 +142,14 @@ class Navigator:
             view, idx, scene, targets, reverse, final, p.follower.approach_m
         )
         raw[waiting] = 0.0
-        # A skid stuck for a while drives a planned manoeuvre instead (not docked, not held).
+        # A skid stuck for a while drives a planned manoeuvre instead (not docked, not held
+        # back by the fill order or queued at a door: fleet.waiting).
         docked = np.array([self.robots[i].dock.docked for i in idx], dtype=bool)
-        held = np.zeros(len(idx), bool) if view.hold is None else view.hold[idx]
         man_states = self._states("manoeuvre")
-        queued = np.array([self.robots[i].traffic.waiting > 0 for i in idx], dtype=bool)
         # With RVO the deadlock ladder is the recovery: manoeuvres on top of it made the
         # 20-skid circle slower (126.7 s against 86.7 s without them).
         use = p.manoeuvre.enabled and p.avoidance != "rvo"
-        eligible = ~docked & ~held & ~waiting & ~queued & use
+        eligible = ~docked & ~waiting & ~fleet.waiting[idx] & use
         man = self.manoeuvre.step(view, idx, raw, man_states, eligible)
         for i in idx[man]:
             self.robots[i].dock.runup = False  # the docking starts afresh after it

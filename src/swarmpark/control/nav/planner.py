@@ -93,8 +93,12 @@ class Planner:
         repair: set[int] = set()
         stuck: set[int] = set()
         if fleet is not None:
-            stuck = self._stuck(view, states, follower, fleet)
-            repair = (self._blocked(view, states, follower, fleet) | stuck) - set(wanted)
+            # Where the skids on their way stand on their paths: one projection for both.
+            rows, left = self._remaining(
+                view, np.flatnonzero(view.active & fleet.bound & ~fleet.parked), follower
+            )
+            stuck = self._stuck(view, states, fleet, rows, left)
+            repair = (self._blocked(view, states, fleet, rows, left) | stuck) - set(wanted)
             wanted = sorted(set(wanted) | repair)
         # A bounded number of plans per tick (longest waiting first), so a park command for a
         # hundred skids does not stall the loop; the others wait for their path.
@@ -131,10 +135,9 @@ class Planner:
         _, s_here = pk.project(rows, view.poses[rows, :2])
         return rows, pk.cum[rows, pk.nseg[rows]] - s_here
 
-    def _blocked(
-        self, view: ControlView, states: list[PathState], follower: PathFollower, fleet
-    ) -> set[int]:
-        """Robots whose path runs into a skid that parked since the last tick."""
+    def _blocked(self, view: ControlView, states: list[PathState], fleet, rows, left) -> set[int]:
+        """Robots (of ``rows``, with ``left`` metres of path to go) whose path runs into a
+        skid that parked since the last tick."""
         prev = self._parked
         self._parked = fleet.parked.copy()
         if prev is None or len(prev) != len(fleet.parked):
@@ -142,8 +145,6 @@ class Planner:
         new = fleet.parked & ~prev
         if not new.any():
             return set()
-        idx = np.flatnonzero(view.active & fleet.bound & ~fleet.parked)
-        rows, left = self._remaining(view, idx, follower)
         out: set[int] = set()
         step = self.params.staging_check_points
         for i, left_m in zip(rows.tolist(), left.tolist(), strict=True):
@@ -163,14 +164,11 @@ class Planner:
                 out.add(i)
         return out
 
-    def _stuck(
-        self, view: ControlView, states: list[PathState], follower: PathFollower, fleet
-    ) -> set[int]:
-        """Robots that have made no progress along their path for ``stuck_s`` (and are not
-        yet where the docking manoeuvre takes over)."""
+    def _stuck(self, view: ControlView, states: list[PathState], fleet, rows, left) -> set[int]:
+        """Robots (of ``rows``, with ``left`` metres of path to go) that have made no progress
+        along their path for ``stuck_s`` (and are not yet where the docking manoeuvre takes
+        over)."""
         fp = self.fleet_params
-        idx = np.flatnonzero(view.active & fleet.bound & ~fleet.parked)
-        rows, left = self._remaining(view, idx, follower)
         out: set[int] = set()
         for i, left_m in zip(rows.tolist(), left.tolist(), strict=True):
             st = states[i]
@@ -193,9 +191,9 @@ class Planner:
 
         The path is planned to a staging point ``staging_m`` before the goal on its axis
         (behind it, to drive in forwards, or in front of it, to back in: whichever is shorter,
-        or on the fleet layers costs less, the run included) and the goal is appended, so the skid arrives aligned. Falls
-        back to a direct path when neither staging point can be reached or the skid is
-        already close. ``run_extra(points)``: the extra cost per metre the fleet layers add
+        or on the fleet layers costs less, the run included) and the goal is appended, so the
+        skid arrives aligned. Falls back to a direct path when neither staging point can be
+        reached or the skid is already close. ``run_extra(points)``: the extra cost per metre the fleet layers add
         along a run (``inf``: blocked by a parked skid).
         """
         axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
