@@ -51,3 +51,38 @@ def test_paths_must_match_robots():
                 }
             ],
         )
+
+
+def test_skids_off_their_start_are_joined_to_the_path():
+    """The leader stands 0.15 m past the first waypoint turned by 10 deg, the follower 0.2 m
+    aside: the paths start at their poses (no cusp from doubling back) and join ahead."""
+    robots = [
+        {"id": "a", "pose": [3.15, 3.0, 10.0]},
+        {"id": "b", "pose": [1.5, 3.2, -5.0]},
+    ]
+    sup = Supervisor(make_world(robots=robots, commands=[]))
+    out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[3, 3], [8, 3], [12, 4]]]))
+    assert out.accepted, out.reason
+    (run,) = sup.formations
+    for k, path in enumerate(run.problem.paths):
+        assert path.pose(0.0)[:2] == pytest.approx(sup.poses_known[k, :2], abs=1e-9)
+        assert path.pose(0.0)[2] == pytest.approx(sup.poses_known[k, 2], abs=1e-9)
+
+
+def test_a_group_starting_close_is_held_no_closer_than_it_starts():
+    """Two skids 1.3 m apart side by side (closer than two circumradii, 1.44 m): accepted,
+    with the safe distance taken from their start."""
+    robots = [{"id": "a", "pose": [3.0, 3.0, 0.0]}, {"id": "b", "pose": [3.0, 1.7, 0.0]}]
+    sup = Supervisor(make_world(robots=robots, commands=[]))
+    out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[3, 3], [9, 3]]]))
+    assert out.accepted, out.reason
+    assert sup.formations[0].problem.d_safe_m == pytest.approx(0.95 * 1.3)
+
+
+def test_a_skid_facing_away_from_its_path_is_refused_saying_so():
+    robots = [{"id": "a", "pose": [3.0, 3.0, 180.0]}, {"id": "b", "pose": [1.5, 3.0, 0.0]}]
+    sup = Supervisor(make_world(robots=robots, commands=[]))
+    out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[3.3, 3], [8, 3]]]))
+    assert not out.accepted
+    assert "robot 0 faces 180 deg away from where its path goes" in out.reason
+    assert sup.formations == []

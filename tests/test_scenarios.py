@@ -51,6 +51,27 @@ def test_formation_transit_holds_the_block():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+def test_formation_transit_from_perturbed_starts(seed):
+    """Real skids never stand exactly at the formation's start: with every start moved by up
+    to 0.2 m and 10 deg the command is accepted (the paths start at the skids' poses and join
+    the waypoints ahead), the block is held and it parks."""
+    import yaml
+
+    from swarmpark.world.scenario import parse_scenario
+
+    data = yaml.safe_load((ROOT / "formation-transit.yaml").read_text())
+    data["seed"], data["perturb"] = seed, {"start_m": 0.2, "start_deg": 10}
+    world = build_world(parse_scenario(data))
+    r = run_world(world).result
+    assert all(c["accepted"] for c in r["commands"]), r["commands"]
+    assert r["success"] and r["collisions"] == []
+    (fe,) = r["formation_error"]
+    assert fe["max_pair_error_m"] < 0.1
+    assert r["min_clearance_m"] > 0.3
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("leaves", [True, False])
 def test_person_blocking_a_formation_holds_it_once(leaves):
     """formation-person-blocks: the blocked group is held ("unresolved" reported once, not

@@ -51,6 +51,14 @@ class FormationError(ValueError):
 
 #: Spacing of the waypoints of derived follower paths (m).
 FOLLOWER_WAYPOINT_STEP_M = 0.5
+#: A path starts at its skid's actual pose and joins the given waypoints this far ahead of the
+#: skid's projection on them (about a skid length: room to turn by a start heading error).
+JOIN_AHEAD_M = 1.0
+#: A skid this close to its path's first waypoint starts there (m).
+AT_START_M = 0.01
+#: A group starting closer than two circumradii is held at no less than this share of its
+#: closest pair's starting distance (the share leaves the tracking law room to err).
+START_SHARE = 0.95
 
 
 def _last_heading(pts: np.ndarray) -> float:
@@ -59,29 +67,81 @@ def _last_heading(pts: np.ndarray) -> float:
     return float(np.arctan2(d[1], d[0]))
 
 
+def _join(pts: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Waypoints that start at the skid's actual position and join ``pts`` ahead of it.
+
+    Real skids never stand exactly at a path's first waypoint: prepending the actual position
+    to the waypoints makes the spline double back whenever the skid stands a little past the
+    first one, and a waypoint just ahead of it bends the spline hard to reach it. Unless the
+    skid stands on the first waypoint (within :data:`AT_START_M`), its position is projected
+    on the waypoint polyline and the waypoints less than :data:`JOIN_AHEAD_M` past the
+    projection are dropped (the last one is always kept).
+    """
+    xy = np.asarray(pose[:2], float)
+    if np.linalg.norm(pts[0] - xy) <= AT_START_M:
+        return pts
+    seg = np.diff(pts, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    t = np.clip(np.einsum("ij,ij->i", xy - pts[:-1], seg) / np.maximum(seg_len**2, 1e-12), 0, 1)
+    foot = pts[:-1] + t[:, None] * seg
+    k = int(np.argmin(np.linalg.norm(foot - xy, axis=1)))
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    s_proj = cum[k] + t[k] * seg_len[k]
+    ahead = pts[cum > s_proj + JOIN_AHEAD_M]
+    return np.vstack([xy, ahead if len(ahead) else pts[-1:]])
+
+
+def _spline(pts: np.ndarray, pose: np.ndarray, k: int) -> SplinePath:
+    """The path of robot ``k``: from its pose and heading, joining ``pts`` (see :func:`_join`)."""
+    pts = _join(pts, pose)
+    try:
+        return SplinePath.through(
+            pts,
+            start_heading=float(pose[2]),
+            end_heading=_last_heading(pts),
+            field_name=f"formation.paths[{k}]",
+        )
+    except ValueError as exc:
+        heading = np.degrees(abs(_wrap(_last_heading(pts[:2]) - float(pose[2]))))
+        why = (
+            f" (robot {k} faces {heading:.0f} deg away from where its path goes: turn it first)"
+            if heading > 90.0
+            else ""
+        )
+        raise FormationError(f"{exc}{why}") from None
+
+
+def _wrap(a: float) -> float:
+    return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
 def _follower_waypoints(leader_wps: np.ndarray, poses: np.ndarray, offsets: np.ndarray):
     """Waypoints for every robot when only the leader's path is given: each follower's path
     is the leader's path carried at its offset in the leader's frame (the first keypoint's
     offset when offsets change along the way; the optimizer blends to the others)."""
-    if np.linalg.norm(leader_wps[0] - poses[0, :2]) > 0.01:
-        leader_wps = np.vstack([poses[0, :2], leader_wps])
-    try:
-        lead = SplinePath.through(
-            leader_wps,
-            start_heading=float(poses[0, 2]),
-            end_heading=_last_heading(leader_wps),
-            field_name="formation.paths[0]",
-        )
-    except ValueError as exc:
-        raise FormationError(str(exc)) from None
+    lead = _spline(leader_wps, poses[0], 0)
     s = np.linspace(0, lead.length_m, max(int(lead.length_m / FOLLOWER_WAYPOINT_STEP_M), 2) + 1)
     lp = lead.pose(s)  # (S, 3)
     off = offsets if offsets.ndim == 2 else offsets[:, 0]
-    out = [leader_wps]
+    out = [lead.waypoints]
     for dx, dy in off:
         c, sn = np.cos(lp[:, 2]), np.sin(lp[:, 2])
         out.append(np.column_stack([lp[:, 0] + c * dx - sn * dy, lp[:, 1] + sn * dx + c * dy]))
     return out
+
+
+def _safe_distance(cmd, footprints: list[Footprint], poses: np.ndarray) -> float:
+    """Constraint (15)'s distance: the command's, or two circumradii (no two skids' circles
+    overlap), but never more than the group's closest pair at its start, so a group that
+    starts closer than that is held no closer than it starts instead of being refused."""
+    if cmd.d_safe_m:
+        return float(cmd.d_safe_m)
+    d = 2.0 * max(f.circumradius_m for f in footprints)
+    if len(poses) > 1:
+        iu, ju = np.triu_indices(len(poses), 1)
+        closest = float(np.min(np.linalg.norm(poses[iu, :2] - poses[ju, :2], axis=1)))
+        d = min(d, START_SHARE * closest)
+    return d
 
 
 @dataclass
@@ -123,21 +183,12 @@ class FormationRun:
         waypoints = [np.asarray(w, float) for w in cmd.paths]
         if len(waypoints) == 1:
             waypoints = _follower_waypoints(waypoints[0], poses, offsets)
-        paths = []
-        for k, pts in enumerate(waypoints):
-            if np.linalg.norm(pts[0] - poses[k, :2]) > 0.01:
-                pts = np.vstack([poses[k, :2], pts])
-            try:
-                paths.append(
-                    SplinePath.through(
-                        pts,
-                        start_heading=float(poses[k, 2]),
-                        end_heading=_last_heading(pts),
-                        field_name=f"formation.paths[{k}]",
-                    )
-                )
-            except ValueError as exc:
-                raise FormationError(str(exc)) from None
+        if len(waypoints) != n:
+            raise FormationError(
+                f"formation.paths: give the leader's path or one per robot ({n}), "
+                f"got {len(waypoints)}"
+            )
+        paths = [_spline(pts, poses[k], k) for k, pts in enumerate(waypoints)]
         edges = np.array([[0, j] for j in range(1, n)], dtype=int)
         offset_at = None if cmd.offset_at is None else np.asarray(cmd.offset_at, float)
         v_max = float(np.min(max_speed)) * LIMIT_SHARE
@@ -147,7 +198,7 @@ class FormationRun:
         if steps is None:
             # Room for the longest path at 2/3 of the speed bound, plus speeding up and down.
             steps = max(4, math.ceil((1.5 * lengths.max() / v_max + 2 * v_max / a_max) / cmd.dt_s))
-        d_safe = cmd.d_safe_m or 2.0 * max(f.circumradius_m for f in footprints)
+        d_safe = _safe_distance(cmd, footprints, poses)
         try:
             problem = FormationProblem(
                 paths=tuple(paths),
