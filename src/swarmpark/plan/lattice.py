@@ -45,8 +45,11 @@ __all__ = [
     "HEADINGS",
     "Manoeuvre",
     "footprint_clear",
+    "free_masks",
     "plan_manoeuvre",
     "rect_mask",
+    "snap_state",
+    "stamp_footprint",
 ]
 
 #: The 16 grid headings as cell steps (dx, dy): a straight move lands on a cell centre.
@@ -133,6 +136,48 @@ def footprint_clear(
     if rc - r < 0 or cc - r < 0 or rc + r + 1 > h or cc + r + 1 > w:
         return False
     return not bool(np.any(occ[rc - r : rc + r + 1, cc - r : cc + r + 1] & mask))
+
+
+def free_masks(occ: np.ndarray, fp: Footprint, res: float, grow_m: float):
+    """``(free, turn_free)``, each ``(16, H, W)`` bool: where the pivot may stand at each grid
+    heading, and where it may turn on the spot from heading ``k`` to ``k + 1`` (the half-way
+    heading free), for footprint ``fp`` grown by ``grow_m`` and half a cell diagonal."""
+    n_r, n_c = occ.shape
+    grow = grow_m + res * np.sqrt(0.5)
+    free = np.empty((_K, n_r, n_c), bool)
+    turn_free = np.empty((_K, n_r, n_c), bool)
+    for k in range(_K):
+        free[k] = _free_at(occ, rect_mask(fp, HEADINGS[k], res, grow))
+    for k in range(_K):
+        nxt = HEADINGS[(k + 1) % _K]
+        mid = np.arctan2(np.sin(HEADINGS[k]) + np.sin(nxt), np.cos(HEADINGS[k]) + np.cos(nxt))
+        turn_free[k] = _free_at(occ, rect_mask(fp, mid, res, grow))
+    return free, turn_free
+
+
+def stamp_footprint(
+    occ: np.ndarray, origin: np.ndarray, res: float, pose: np.ndarray, fp: Footprint, grow_m: float
+) -> None:
+    """Mark the cells of footprint ``fp`` at ``pose`` (grown by ``grow_m``) occupied in the
+    window ``occ`` (in place; the parts outside the window are dropped)."""
+    mask = rect_mask(fp, float(pose[2]), res, grow_m)
+    r = mask.shape[0] // 2
+    rc = int(np.floor((pose[1] - origin[1]) / res))
+    cc = int(np.floor((pose[0] - origin[0]) / res))
+    h, w = occ.shape
+    r0, r1 = max(rc - r, 0), min(rc + r + 1, h)
+    c0, c1 = max(cc - r, 0), min(cc + r + 1, w)
+    if r0 >= r1 or c0 >= c1:
+        return
+    occ[r0:r1, c0:c1] |= mask[r0 - (rc - r) : r1 - (rc - r), c0 - (cc - r) : c1 - (cc - r)]
+
+
+def snap_state(pose: np.ndarray, origin: np.ndarray, res: float) -> tuple[int, int, int]:
+    """``(heading index, row, col)`` of the lattice state nearest ``pose``."""
+    c = int(np.floor((pose[0] - origin[0]) / res))
+    r = int(np.floor((pose[1] - origin[1]) / res))
+    dk = np.abs(np.angle(np.exp(1j * (HEADINGS - pose[2]))))
+    return int(np.argmin(dk)), r, c
 
 
 def _free_at(occ: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -227,23 +272,9 @@ def plan_manoeuvre(
     """
     occ = np.asarray(occ, bool)
     n_r, n_c = occ.shape
-    grow = grow_m + res * np.sqrt(0.5)
-    free = np.empty((_K, n_r, n_c), bool)
-    turn_free = np.empty((_K, n_r, n_c), bool)
-    for k in range(_K):
-        free[k] = _free_at(occ, rect_mask(fp, HEADINGS[k], res, grow))
-    for k in range(_K):
-        nxt = HEADINGS[(k + 1) % _K]
-        mid = np.arctan2(np.sin(HEADINGS[k]) + np.sin(nxt), np.cos(HEADINGS[k]) + np.cos(nxt))
-        turn_free[k] = _free_at(occ, rect_mask(fp, mid, res, grow))
+    free, turn_free = free_masks(occ, fp, res, grow_m)
 
-    def snap(pose):
-        c = int(np.floor((pose[0] - origin[0]) / res))
-        r = int(np.floor((pose[1] - origin[1]) / res))
-        dk = np.abs(np.angle(np.exp(1j * (HEADINGS - pose[2]))))
-        return int(np.argmin(dk)), r, c
-
-    s, g = snap(start), snap(goal)
+    s, g = snap_state(start, origin, res), snap_state(goal, origin, res)
     for _k, r, c in (s, g):
         if not (0 <= r < n_r and 0 <= c < n_c):
             return None

@@ -21,6 +21,7 @@ from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
+from swarmpark.plan.spot_reach import spot_reach
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
 
@@ -29,6 +30,8 @@ __all__ = ["CommandsMixin", "Outcome", "ParkGroup", "ParkPlan", "FORMATION_GRACE
 #: A formation group keeps tracking its plan this long after the plan ends, then the
 #: navigation stack docks each skid exactly.
 FORMATION_GRACE_S = 3.0
+#: Parks of up to this many spots get the manoeuvre check of their spots (plan/spot_reach).
+MAX_REACH_CHECKED = 60
 
 
 @dataclass(frozen=True)
@@ -176,6 +179,8 @@ class CommandsMixin:
             return str(exc)
         goals = np.asarray(lay.poses, float)
         fps = [self.info.footprints[i] for i in idx]
+        report = dict(lay.report)
+        self._flag_unreachable(report, goals, fps, tuple(lay.fill_order))
         fits = assign_mod.footprint_fits(
             [(f.length_m, f.width_m) for f in fps], [(f.length_m, f.width_m) for f in fps]
         )
@@ -192,7 +197,7 @@ class CommandsMixin:
             tuple(lay.fill_order),
             boundary,
             lay.method,
-            dict(lay.report),
+            report,
             goal_dims=tuple((f.length_m, f.width_m) for f in fps),
             blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
         )
@@ -204,6 +209,32 @@ class CommandsMixin:
             self.info.max_speed_mps[idx],
         )
         return ParkPlan(group, bound_inputs)
+
+    def _flag_unreachable(self, report: dict, goals: np.ndarray, fps, order) -> None:
+        """Flag, in the layout report, the spots no manoeuvre gets a skid into in fill order
+        (:mod:`swarmpark.plan.spot_reach`): the operator sees them before confirming; the
+        skids still try. Parks of more than ``MAX_REACH_CHECKED`` spots are not checked (the
+        check costs a few ms per spot), and the report says so."""
+        if len(goals) > MAX_REACH_CHECKED:
+            report["notices"] = list(report.get("notices", [])) + [
+                f"manoeuvre check skipped: {len(goals)} spots (checked up to {MAX_REACH_CHECKED})"
+            ]
+            return
+        grid = self.world.grid
+        flagged = spot_reach(grid.occupied, grid.origin, grid.resolution_m, goals, fps, order)
+        if not flagged:
+            return
+        report["unreachable_spots"] = [
+            {
+                "spot": f.spot,
+                "pose": [round(f.pose[0], 3), round(f.pose[1], 3), round(np.degrees(f.pose[2]), 1)],
+                "reason": f.reason,
+            }
+            for f in flagged
+        ]
+        report["notices"] = list(report.get("notices", [])) + [
+            f"spot {f.spot} at ({f.pose[0]:.2f}, {f.pose[1]:.2f}): {f.reason}" for f in flagged
+        ]
 
     def apply_park(self, plan: ParkPlan | str) -> Outcome:
         """Commit a plan of :meth:`prepare_park` (cheap; refused if it went stale)."""
@@ -220,11 +251,15 @@ class CommandsMixin:
         goals = group.goals
         self._set_goals(idx, goals[group.goal_of])
         self.metrics.defer_lower_bound(*plan.bound_inputs)
+        extra = {}
+        if group.report.get("unreachable_spots"):
+            extra["unreachable_spots"] = group.report["unreachable_spots"]
         return self._accept(
             "park",
             robots=[self.ids[i] for i in idx],
             method=group.method,
             goals=np.round(goals[group.goal_of], 4).tolist(),
+            **extra,
         )
 
     def _cost_matrix(self, idx: np.ndarray, goals: np.ndarray, cost: str, fits) -> np.ndarray:

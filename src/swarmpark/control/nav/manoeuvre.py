@@ -21,7 +21,7 @@ from swarmpark.control.base import ControlView
 from swarmpark.control.nav.params import ManoeuvreParams
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.progress import NAV_HEADING_LEVER_M, remaining_m
-from swarmpark.plan.lattice import footprint_clear, plan_manoeuvre, rect_mask
+from swarmpark.plan.lattice import footprint_clear, plan_manoeuvre, stamp_footprint
 
 __all__ = ["ManoeuvrePlanner", "ManoeuvreState"]
 
@@ -151,25 +151,14 @@ class ManoeuvrePlanner:
         origin = np.array([grid.origin[0] + c0 * res, grid.origin[1] + r0 * res])
         for j in range(len(view.poses)):
             if j != i:
-                self._stamp(occ, origin, res, view.poses[j], view.footprints[j])
+                stamp_footprint(
+                    occ, origin, res, view.poses[j], view.footprints[j], p.skid_margin_m
+                )
         for xy, rad in zip(view.people_xy, view.people_radius, strict=True):
             rr, cc = np.mgrid[0 : occ.shape[0], 0 : occ.shape[1]]
             d = np.hypot(origin[0] + (cc + 0.5) * res - xy[0], origin[1] + (rr + 0.5) * res - xy[1])
             occ |= d <= rad + p.person_margin_m
         return occ, origin, res
-
-    def _stamp(self, occ, origin, res, pose, fp) -> None:
-        """Mark skid footprint ``fp`` at ``pose`` (grown by the skid margin) in ``occ``."""
-        mask = rect_mask(fp, float(pose[2]), res, self.params.skid_margin_m)
-        r = mask.shape[0] // 2
-        rc = int(np.floor((pose[1] - origin[1]) / res))
-        cc = int(np.floor((pose[0] - origin[0]) / res))
-        h, w = occ.shape
-        r0, r1 = max(rc - r, 0), min(rc + r + 1, h)
-        c0, c1 = max(cc - r, 0), min(cc + r + 1, w)
-        if r0 >= r1 or c0 >= c1:
-            return
-        occ[r0:r1, c0:c1] |= mask[r0 - (rc - r) : r1 - (rc - r), c0 - (cc - r) : c1 - (cc - r)]
 
     def _start(self, view: ControlView, i: int, st: ManoeuvreState) -> None:
         p = self.params

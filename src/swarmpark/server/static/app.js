@@ -392,9 +392,12 @@ function drawOperatorLayer() {
     const goalOf = S.preview.goal_of || [];
     const robotOfGoal = new Map(goalOf.map((g, k) => [g, order[k]]));
     const rank = new Map((S.preview.fill_order || []).map((g, k) => [g, k + 1]));
+    // Spots no manoeuvre reaches in fill order (plan/spot_reach): drawn red.
+    const stuck = new Set(((S.preview.report || {}).unreachable_spots || []).map((u) => u.spot));
     S.preview.goals.forEach((g, k) => {
       const i = robotOfGoal.has(k) ? robotOfGoal.get(k) : (order[k] >= 0 ? order[k] : 0);
-      drawFootprint(i, g[0], g[1], g[2], "rgba(255,120,255,0.18)", "#ff78ff", 1.5, [5, 3]);
+      if (stuck.has(k)) drawFootprint(i, g[0], g[1], g[2], "rgba(255,60,60,0.35)", "#ff3c3c", 2, [5, 3]);
+      else drawFootprint(i, g[0], g[1], g[2], "rgba(255,120,255,0.18)", "#ff78ff", 1.5, [5, 3]);
       const [cx, cy] = centre(i, g[0], g[1], g[2]);
       drawArrow(cx, cy, g[2], Math.max(6, 0.4 * S.view.scale), "#ff78ff", 1.5);
       if (rank.has(k)) {  // the fill order: 1 is parked first
@@ -568,8 +571,13 @@ function updateParkPanel() {
   else if (!S.boundary) st.textContent = `${S.selection.size} skid(s) selected: draw the parking boundary.`;
   else if (!S.preview) st.textContent = "Computing the layout...";
   else if (S.preview.error) { st.textContent = S.preview.error; st.classList.add("bad"); }
-  else st.textContent = `Preview: ${S.preview.goals.length} goals (${S.preview.method}, heading ` +
-    `${S.preview.report.heading_deg ?? "?"}°, spacing ${(S.preview.report.min_spacing_m ?? 0).toFixed(2)} m). Confirm to park.`;
+  else {
+    const stuck = S.preview.report.unreachable_spots || [];
+    st.textContent = `Preview: ${S.preview.goals.length} goals (${S.preview.method}, heading ` +
+      `${S.preview.report.heading_deg ?? "?"}°, spacing ${(S.preview.report.min_spacing_m ?? 0).toFixed(2)} m). ` +
+      (stuck.length ? `${stuck.length} spot(s) in red: ${stuck[0].reason}. ` : "") + "Confirm to park.";
+    if (stuck.length) st.classList.add("bad");
+  }
 }
 
 function setTool(tool) {
