@@ -178,7 +178,9 @@ class Navigator:
                 view, idx, raw, dist_goal, self._states("give_way"), docked_all
             )
             raw[man] = mraw
-            cmd[idx] = self._monitor(view, idx, raw)
+            # Pairs whose commands together close in: the one without the right of way
+            # stops (each skid's own check sees the others where they stand).
+            cmd[idx] = self._monitor(view, idx, raw, joint="yield")
         self.manoeuvre.observe(view, idx, man_states, raw, cmd[idx])
         hold_outside(view, idx, cmd, p.hold)
         self.queued = np.zeros(n, dtype=bool)
