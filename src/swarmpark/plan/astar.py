@@ -4,8 +4,9 @@ The metric is ``skimage.graph.MCP_Geometric``'s (8-connected, a move costs its l
 the mean of the two cells' costs, ``inf`` impassable), so the costs of the paths are the
 same as a Dijkstra flood's; the search is guided by the octile distance to the nearest goal
 (admissible and consistent because every cell costs at least 1 per cell length), so it expands
-the cells near the way instead of the whole map. Ties between equally cheap paths may break
-differently from skimage's flood (a different but equally cheap path).
+the cells near the way instead of the whole map. Ties are broken as the flood breaks them
+(the cell reached more cheaply first), so the paths are mostly the flood's; where float
+rounding decides a tie they may differ (a different but equally cheap path).
 
 The search arrays are kept between calls (:class:`Workspace`, one per grid shape) and marked
 per search instead of cleared, so a search on a large map costs the cells it expands, not the
@@ -90,7 +91,7 @@ def _astar(cost, start, goals, g, move, seen, done, mark, dr, dc, ln, budget):
     open_ = np.ones(goals.shape[0], np.bool_)
     left = goals.shape[0]
     h0 = _heuristic(start[0], start[1], goals, open_)
-    heap = [(np.round(h0 * 1e9) * 1e-9, h0, s0)]
+    heap = [(np.round(h0 * 1e9) * 1e-9, 0.0, s0)]
     expanded = 0
     while len(heap) > 0 and left > 0 and expanded < budget:
         _, _, s = heapq.heappop(heap)
@@ -115,7 +116,7 @@ def _astar(cost, start, goals, g, move, seen, done, mark, dr, dc, ln, budget):
             for _, _, t in heap:
                 if done[t] != mark:
                     ht = _heuristic(t // w_, t % w_, goals, open_)
-                    rekeyed.append((np.round((g[t] + ht) * 1e9) * 1e-9, ht, t))
+                    rekeyed.append((np.round((g[t] + ht) * 1e9) * 1e-9, g[t], t))
             heapq.heapify(rekeyed)
             heap = rekeyed
         gs = g[s]
@@ -137,10 +138,13 @@ def _astar(cost, start, goals, g, move, seen, done, mark, dr, dc, ln, budget):
                 g[ns] = ng
                 move[ns] = m
                 hn = _heuristic(nr, nc, goals, open_)
-                # Ties on f go to the deeper cell (smaller h), so the search runs along one of
-                # the many equally cheap ways instead of filling the region between them. f is
-                # rounded (to 1e-9 cell lengths) first: rounding noise would break the ties.
-                heapq.heappush(heap, (np.round((ng + hn) * 1e9) * 1e-9, hn, ns))
+                # Ties on f go to the cell reached more cheaply, as a Dijkstra flood would pop
+                # them: each cell then keeps the parent the flood gives it and the paths are
+                # mostly the flood's (132 of 150 on two suite maps). Deeper-first ties would
+                # expand fewer cells (one way instead of the band of equally cheap ones) but
+                # change the paths. f is rounded (to 1e-9 cell lengths) so that rounding
+                # noise does not break the ties.
+                heapq.heappush(heap, (np.round((ng + hn) * 1e9) * 1e-9, ng, ns))
     return expanded
 
 

@@ -100,10 +100,14 @@ class Planner:
             stuck = self._stuck(view, states, fleet, rows, left)
             repair = (self._blocked(view, states, fleet, rows, left) | stuck) - set(wanted)
             wanted = sorted(set(wanted) | repair)
-        # A bounded number of plans per tick (longest waiting first), so a park command for a
-        # hundred skids does not stall the loop; the others wait for their path.
+        # A bounded number of plans per tick (longest waiting first), and a bounded search
+        # effort (cells expanded), so a park command for hundreds of skids does not stall the
+        # loop; the others wait for their path.
         wanted.sort(key=lambda i: (states[i].planned_t, i))
+        work: list[int] = []
         for i in wanted[: p.max_plans_per_tick]:
+            if sum(work) >= p.max_plan_cells_per_tick:
+                break
             st = states[i]
             goal = view.goals[i]
             cm = self.costmap(view, view.footprints[i])
@@ -115,9 +119,9 @@ class Planner:
                 bound = fleet.bound if i in stuck else np.zeros_like(fleet.bound)
                 fcm = fleet_costmap(cm, view, i, parked, bound, self.fleet_params)
                 extra = run_extra(view, i, parked, bound, self.fleet_params)
-                path = self.plan(fcm, view.poses[i], goal, extra)
+                path = self.plan(fcm, view.poses[i], goal, extra, work=work)
             if path is None:  # no way around the fleet: the static map's (avoidance copes)
-                path = self.plan(cm, view.poses[i], goal)
+                path = self.plan(cm, view.poses[i], goal, work=work)
             st.path, st.path_goal, st.planned_t = path, goal.copy(), view.t
             st.best_left_m, st.best_t = np.inf, view.t
             st.failed = path is None
@@ -185,7 +189,7 @@ class Planner:
         return out
 
     def plan(
-        self, cm: Costmap, pose: np.ndarray, goal: np.ndarray, run_extra=None
+        self, cm: Costmap, pose: np.ndarray, goal: np.ndarray, run_extra=None, *, work=None
     ) -> np.ndarray | None:
         """A path that ends with a straight run along the goal's axis.
 
@@ -193,14 +197,17 @@ class Planner:
         (behind it, to drive in forwards, or in front of it, to back in: whichever is shorter,
         or on the fleet layers costs less, the run included) and the goal is appended, so the
         skid arrives aligned. Falls back to a direct path when neither staging point can be
-        reached or the skid is already close. ``run_extra(points)``: the extra cost per metre the fleet layers add
-        along a run (``inf``: blocked by a parked skid).
+        reached or the skid is already close. ``run_extra(points)``: the extra cost per metre the
+        fleet layers add along a run (``inf``: blocked by a parked skid). ``work``: if given (a
+        list), the number of grid cells the search expanded is appended to it.
         """
         axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
         stages = [goal[:2] + side * self.staging_m * axis for side in (-1.0, 1.0)]
         # One Dijkstra run serves the direct path and both staging points.
         costs: list[float] = []
-        direct, *heads = paths_from(cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs)
+        direct, *heads = paths_from(
+            cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs, expanded=work
+        )
         if direct is not None:
             direct = shortcut(direct, cm.cost, cm.grid)
         if direct is None or np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
