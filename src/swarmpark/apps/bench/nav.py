@@ -196,6 +196,7 @@ def fleet_ticks(n: int, steady: int) -> dict:
         "first": first,
         "planning": np.asarray(planning),
         "steady": np.asarray(ticks),
+        "dt": sup.world.scenario.dt_s,
     }
 
 
@@ -228,6 +229,7 @@ def bench_fleet(quick: bool) -> list[dict]:
                 "planning_max_ms": round(float(plan.max()), 1) if len(plan) else 0.0,
                 "steady_mean_ms": round(mean, 2),
                 "steady_p99_ms": round(p99, 2),
+                "control_period_ms": round(r["dt"] * 1e3, 1),
                 "meets_target": (bool(targets[n]) and p99 <= 3 * mean) if n in targets else None,
             }
         )
