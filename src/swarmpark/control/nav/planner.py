@@ -9,7 +9,7 @@ from swarmpark.control.base import ControlView
 from swarmpark.control.nav.fleetmap import (
     FleetState,
     blocking,
-    fleet_costmap,
+    fleet_layers,
     points_in_rects,
     run_extra,
 )
@@ -117,9 +117,9 @@ class Planner:
                 # the skids standing still and, if it can, off the spots still to be filled.
                 parked = fleet.parked | (fleet.still if i in stuck else False)
                 bound = fleet.bound if i in stuck else np.zeros_like(fleet.bound)
-                fcm = fleet_costmap(cm, view, i, parked, bound, self.fleet_params)
                 extra = run_extra(view, i, parked, bound, self.fleet_params)
-                path = self.plan(fcm, view.poses[i], goal, extra, work=work)
+                with fleet_layers(cm, view, i, parked, bound, self.fleet_params) as fcm:
+                    path = self.plan(fcm, view.poses[i], goal, extra, work=work)
             if path is None:  # no way around the fleet: the static map's (avoidance copes)
                 path = self.plan(cm, view.poses[i], goal, work=work)
             st.path, st.path_goal, st.planned_t = path, goal.copy(), view.t
@@ -203,15 +203,16 @@ class Planner:
         """
         axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
         stages = [goal[:2] + side * self.staging_m * axis for side in (-1.0, 1.0)]
-        # One Dijkstra run serves the direct path and both staging points.
+        # One search serves the direct path and both staging points.
         costs: list[float] = []
         direct, *heads = paths_from(
             cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs, expanded=work
         )
-        if direct is not None:
-            direct = shortcut(direct, cm.cost, cm.grid)
-        if direct is None or np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
-            return direct
+        # The direct path is shortcut only if it is the one returned.
+        if direct is None:
+            return None
+        if np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
+            return shortcut(direct, cm.cost, cm.grid)
         best, best_cost = None, np.inf
         for stage, head, c in zip(stages, heads, costs[1:], strict=True):
             run = self._run_cost(cm, goal, stage, run_extra)
@@ -223,7 +224,7 @@ class Planner:
             total = path_length(cand) if run_extra is None else c + run
             if total < best_cost:
                 best, best_cost = cand, total
-        return best if best is not None else direct
+        return best if best is not None else shortcut(direct, cm.cost, cm.grid)
 
     def _run_cost(self, cm: Costmap, goal: np.ndarray, stage: np.ndarray, run_extra) -> float:
         """Cost of the straight run from the staging point to the goal: its length, times
