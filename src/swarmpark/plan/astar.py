@@ -10,7 +10,8 @@ rounding decides a tie they may differ (a different but equally cheap path).
 
 The search arrays are kept between calls (:class:`Workspace`, one per grid shape) and marked
 per search instead of cleared, so a search on a large map costs the cells it expands, not the
-map.
+map. They are shared by the searches of one process, which therefore must not run searches
+from several threads at once (the controller plans in the tick, one search at a time).
 """
 
 from __future__ import annotations
