@@ -7,7 +7,12 @@ from dataclasses import replace
 import numpy as np
 from navkit import FOOTPRINT, make_view
 
-from swarmpark.control.nav.fleetmap import FleetState, fleet_costmap, points_in_rects
+from swarmpark.control.nav.fleetmap import (
+    FleetState,
+    fleet_costmap,
+    fleet_layers,
+    points_in_rects,
+)
 from swarmpark.control.nav.follower import PathFollower, PathState
 from swarmpark.control.nav.params import FleetMapParams, FollowerParams, PlannerParams
 from swarmpark.control.nav.planner import Planner
@@ -41,6 +46,21 @@ def test_parked_skids_are_lethal_and_goal_spots_cost_extra():
     view_hi = make_view(poses, goals, priority=[5, 1, 1])
     fcm_hi = fleet_costmap(cm, view_hi, 0, parked, bound, P)
     assert np.isfinite(fcm_hi.cost[rc[0, 0], rc[0, 1]])
+
+
+def test_fleet_layers_in_place_are_the_copy_and_are_undone():
+    poses = [[1.0, 3.0, 0.0], [5.0, 3.0, np.pi / 2], [7.0, 1.5, 0.0], [5.2, 4.0, 0.3]]
+    goals = [[9.0, 3.0, 0.0], [5.0, 3.0, np.pi / 2], [5.0, 4.6, 0.0], [5.2, 4.0, 0.3]]
+    view = make_view(poses, goals)
+    cm = _planner().costmap(view, FOOTPRINT)
+    before = cm.cost.copy()
+    parked = np.array([False, True, False, True])  # two parked skids whose bands overlap
+    for p in (P, replace(P, spot_cost=3.0)):
+        want = fleet_costmap(cm, view, 0, parked, ~parked, p).cost
+        with fleet_layers(cm, view, 0, parked, ~parked, p) as fcm:
+            assert fcm.cost is cm.cost
+            assert np.array_equal(fcm.cost, want)
+        assert np.array_equal(cm.cost, before)
 
 
 def test_first_plan_is_static_and_is_repaired_when_a_skid_parks_on_it():

@@ -45,6 +45,23 @@ def test_plans_are_bounded_per_tick_and_made_for_the_current_goal():
     assert states[0].path is first
 
 
+def test_the_search_effort_per_tick_is_bounded():
+    poses = [[1.0, 1.0 + k, 0.0] for k in range(4)]
+    goals = [[8.0, 1.0 + k, 0.0] for k in range(4)]
+    view = make_view(poses, goals, goal_changed=[True] * 4)
+    states = [PathState() for _ in range(4)]
+    # One cell of budget: the first plan of the tick runs, the others wait for the next ticks.
+    pl, fol = _planner(max_plan_cells_per_tick=1), PathFollower(FollowerParams())
+    pl.update(view, states, fol)
+    assert [s.path is not None for s in states] == [True, False, False, False]
+    pl.update(make_view(poses, goals, t=0.1), states, fol)
+    assert [s.path is not None for s in states] == [True, True, False, False]
+    # The plans are the same as without a budget.
+    free = [PathState() for _ in range(4)]
+    _planner().update(view, free, fol)
+    assert np.array_equal(free[0].path, states[0].path)
+
+
 def test_an_unreachable_goal_fails_and_is_retried_when_due():
     # The goal is walled in.
     walls = [(6.0, 0.0, 6.2, 6.0)]
@@ -61,5 +78,7 @@ def test_an_unreachable_goal_fails_and_is_retried_when_due():
 def test_planner_params_name_the_bad_field():
     with pytest.raises(ValueError, match="PlannerParams.max_plans_per_tick"):
         PlannerParams(max_plans_per_tick=0)
+    with pytest.raises(ValueError, match="PlannerParams.max_plan_cells_per_tick"):
+        PlannerParams(max_plan_cells_per_tick=0)
     with pytest.raises(ValueError, match="PlannerParams.plan_resolution_m"):
         PlannerParams(plan_resolution_m=-0.1)

@@ -23,7 +23,8 @@ def test_path_goes_around_the_wall_with_clearance():
     # Every segment stays at least the inscribed radius (less a cell) from the wall.
     assert LineString(path).distance(WALL) >= 0.4 - 0.05
     assert path_length(path) > 2 * 3.5  # it had to go over the top of the wall
-    assert len(path) < 12  # line-of-sight shortcutting leaves a few corners, not every cell
+    # Line-of-sight shortcutting leaves a few corners, not every cell (the cells number > 100).
+    assert len(path) < 20
 
 
 def test_unreachable_goal_gives_none():

@@ -27,6 +27,8 @@ __all__ = [
     "assign",
     "sparse_assign",
     "reassign",
+    "reassign_local",
+    "pair_costs",
     "bottleneck_assignment",
     "AssignmentError",
 ]
@@ -38,6 +40,12 @@ HYSTERESIS_FRACTION = 0.1
 HYSTERESIS_ABS_M = 0.5
 #: Candidate goals per robot (and robots per goal) in the sparse k-nearest graph.
 SPARSE_K = 20
+#: Groups larger than this re-assign by swaps between neighbours (:func:`reassign_local`)
+#: instead of a Hungarian re-solve every tick (O(n^3): 1.6 ms at 200 robots, 29 ms at 500,
+#: 265 ms at 1000 on a fleet park; one core).
+LOCAL_REASSIGN_ABOVE = 100
+#: Neighbours per robot whose goals it may swap with in :func:`reassign_local`.
+SWAP_K = 8
 
 
 class AssignmentError(ValueError):
@@ -206,6 +214,79 @@ def reassign(
     if now - new > max(fraction * now, absolute):
         return best, True
     return current, False
+
+
+def pair_costs(
+    robot_xy: np.ndarray, goal_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray, cost: str
+) -> np.ndarray:
+    """``cost_matrix(robot_xy, goal_xy, cost)[rows, cols]`` without the whole matrix (for the
+    ``euclidean`` and ``formation`` costs, which are per pair once the centroids are known)."""
+    robot_xy = np.asarray(robot_xy, float).reshape(-1, 2)
+    goal_xy = np.asarray(goal_xy, float).reshape(-1, 2)
+    r, g = robot_xy[rows], goal_xy[cols]
+    direct = np.hypot(*(r - g).T)
+    if cost == "euclidean":
+        return direct
+    if cost == "formation":
+        shifted = r - robot_xy.mean(axis=0) + goal_xy.mean(axis=0)
+        return np.hypot(*(shifted - g).T) + 1e-2 * direct
+    raise ValueError(f"pair_costs: cost must be 'euclidean' or 'formation' (got {cost!r})")
+
+
+def reassign_local(
+    robot_xy: np.ndarray,
+    goal_xy: np.ndarray,
+    current: np.ndarray,
+    cost: str,
+    *,
+    fits=None,
+    locked: np.ndarray | None = None,
+    k: int = SWAP_K,
+    fraction: float = HYSTERESIS_FRACTION,
+    absolute: float = HYSTERESIS_ABS_M,
+) -> tuple[np.ndarray, bool]:
+    """Re-assignment for large groups: goal swaps between each robot and its ``k`` nearest.
+
+    A swap is taken when it lowers the pair's cost by more than ``fraction`` of it and more
+    than ``absolute`` (the hysteresis of :func:`reassign`, per pair), the best swaps first,
+    each robot in at most one swap per call; robots in ``locked`` keep their goals.
+    ``fits(rows, cols)``: whether robot ``rows`` fits goal ``cols`` (elementwise), if some do
+    not. A local improvement (2-opt), O(n k) per call instead of the Hungarian re-solve's
+    O(n^3). Returns the assignment and whether it changed.
+    """
+    from scipy.spatial import cKDTree
+
+    current = np.asarray(current, int)
+    n = len(current)
+    kk = min(k, n - 1)
+    if kk < 1:
+        return current, False
+    _, nb = cKDTree(robot_xy).query(robot_xy, kk + 1)
+    i = np.repeat(np.arange(n), kk)
+    j = np.asarray(nb)[:, 1:].ravel()
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    key = np.unique(lo * n + hi)
+    i, j = key // n, key % n
+    if locked is not None:
+        free = ~locked[i] & ~locked[j]
+        i, j = i[free], j[free]
+    gi, gj = current[i], current[j]
+    now = pair_costs(robot_xy, goal_xy, i, gi, cost) + pair_costs(robot_xy, goal_xy, j, gj, cost)
+    new = pair_costs(robot_xy, goal_xy, i, gj, cost) + pair_costs(robot_xy, goal_xy, j, gi, cost)
+    take = now - new > np.maximum(fraction * now, absolute)
+    if fits is not None:
+        take &= fits(i, gj) & fits(j, gi)
+    if not take.any():
+        return current, False
+    i, j, gain = i[take], j[take], (now - new)[take]
+    out = current.copy()
+    used = np.zeros(n, bool)
+    order = np.argsort(-gain, kind="stable")
+    for a, b in zip(i[order].tolist(), j[order].tolist(), strict=True):
+        if not (used[a] or used[b]):
+            used[a] = used[b] = True
+            out[a], out[b] = current[b], current[a]
+    return out, True
 
 
 def bottleneck_assignment(cost: np.ndarray) -> tuple[np.ndarray, float]:

@@ -247,6 +247,11 @@ def cmd_bench(args) -> int:
         report["benchmarks"] = {**kept, **report["benchmarks"]}
     out.write_text(json.dumps(report, indent=2) + "\n")
     print(f"\nwrote {out}")
+    fleet = report["benchmarks"].get("nav.fleet")
+    if fleet is not None and "nav.fleet" in selected and not args.quick:
+        from swarmpark.apps.bench.plots import scaling_png
+
+        print(f"wrote {scaling_png(fleet['rows'], Path(args.plot))}")
     return EXIT_OK
 
 
@@ -419,6 +424,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="small sizes (smoke run)")
     b.add_argument("--list", action="store_true", help="list the benchmarks and exit")
     b.add_argument("--out", default="benchmarks/results.json", help="JSON output path")
+    b.add_argument(
+        "--plot",
+        default="docs/img/performance-scaling.png",
+        help="where nav.fleet's scaling plot goes (a full run of nav.fleet only)",
+    )
     b.set_defaults(func=cmd_bench)
 
     f = sub.add_parser("formation", help="formation velocity planning (Liu, Sun, Zhu 2010)")

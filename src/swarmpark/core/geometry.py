@@ -313,7 +313,11 @@ def integrate_unicycle(poses: np.ndarray, v: np.ndarray, w: np.ndarray, dt: floa
     dth = w * dt
     straight = np.abs(w) < _STRAIGHT_EPS
     safe_w = np.where(straight, 1.0, w)
-    dx = np.where(straight, v * dt * np.cos(th), v / safe_w * (np.sin(th + dth) - np.sin(th)))
-    dy = np.where(straight, v * dt * np.sin(th), -v / safe_w * (np.cos(th + dth) - np.cos(th)))
-    new_th = (th + dth + np.pi) % (2 * np.pi) - np.pi
+    # Each sine and cosine once (both branches use them; the same values as computing them
+    # per branch).
+    s0, c0 = np.sin(th), np.cos(th)
+    th1 = th + dth
+    dx = np.where(straight, v * dt * c0, v / safe_w * (np.sin(th1) - s0))
+    dy = np.where(straight, v * dt * s0, -v / safe_w * (np.cos(th1) - c0))
+    new_th = (th1 + np.pi) % (2 * np.pi) - np.pi
     return np.column_stack([x + dx, y + dy, new_th])

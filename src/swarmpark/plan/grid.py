@@ -1,13 +1,16 @@
-"""Grid path planning on an inflated costmap (Dijkstra via scikit-image's minimum-cost paths).
+"""Grid path planning on an inflated costmap.
 
 The costmap follows Navigation2's idea: cells closer to an obstacle than the skid's inscribed
 radius are lethal; between the inscribed and circumscribed radius the cost rises so paths keep
-to the middle of corridors; beyond it the cost is the travelled distance. The search itself is
-``skimage.graph.MCP_Geometric`` (Dijkstra with diagonal moves weighted by length).
+to the middle of corridors; beyond it the cost is the travelled distance. Paths are searched
+by A* (:mod:`.astar`, the metric of ``skimage.graph.MCP_Geometric``: 8-connected, diagonal
+moves weighted by length), which expands the cells near the way rather than flooding the map;
+whole-map fields (:func:`distance_field_from`) are skimage's Dijkstra floods.
 """
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,6 +18,7 @@ from scipy import ndimage
 from skimage.graph import MCP_Geometric
 
 from swarmpark.core.gridmap import OccupancyGrid
+from swarmpark.plan.astar import search
 
 __all__ = [
     "paths_from",
@@ -95,6 +99,36 @@ def _free_disc(
     return cost
 
 
+@contextmanager
+def _freed(costmap: Costmap, points, radius_m: float):
+    """The costmap's cost array with :func:`_free_disc` applied around each of ``points``,
+    changed in place for the duration of the block and restored after it (a copy of a large
+    map per plan would cost more than the search)."""
+    cost, grid = costmap.cost, costmap.grid
+    h, w = cost.shape
+    r = int(np.ceil(radius_m / grid.resolution_m))
+    rcs = grid.world_to_cell(np.asarray(points, float).reshape(-1, 2))
+    changed = []
+    for rc in rcs:
+        r0, r1 = max(rc[0] - r, 0), min(rc[0] + r + 1, h)
+        c0, c1 = max(rc[1] - r, 0), min(rc[1] + r + 1, w)
+        if r0 >= r1 or c0 >= c1:
+            continue
+        rr, cc = np.mgrid[r0:r1, c0:c1]
+        near = (rr - rc[0]) ** 2 + (cc - rc[1]) ** 2 <= r * r
+        fix = near & ~np.isfinite(cost[r0:r1, c0:c1]) & ~grid.occupied[r0:r1, c0:c1]
+        if fix.any():
+            rows, cols = np.nonzero(fix)
+            flat = (rows + r0) * w + (cols + c0)
+            changed.append(flat)
+            cost.flat[flat] = 1.0 + INFLATION_WEIGHT
+    try:
+        yield cost
+    finally:
+        for flat in changed:
+            cost.flat[flat] = np.inf
+
+
 def plan_path(costmap: Costmap, start_xy, goal_xy, *, free_radius_m: float | None = None):
     """Least-cost path from ``start_xy`` to ``goal_xy`` as world points ``(K, 2)``.
 
@@ -105,60 +139,62 @@ def plan_path(costmap: Costmap, start_xy, goal_xy, *, free_radius_m: float | Non
     start_xy = np.asarray(start_xy, float)
     goal_xy = np.asarray(goal_xy, float)
     r_free = costmap.inscribed_m if free_radius_m is None else free_radius_m
-    cost = _free_disc(costmap.cost, grid, start_xy, r_free)
-    cost = _free_disc(cost, grid, goal_xy, r_free)
     s, g = grid.world_to_cell(np.stack([start_xy, goal_xy]))
     if not (grid.in_bounds(s[None])[0] and grid.in_bounds(g[None])[0]):
         return None
-    if not (np.isfinite(cost[tuple(s)]) and np.isfinite(cost[tuple(g)])):
-        return None
-    mcp = MCP_Geometric(cost, fully_connected=True)
-    cum, _ = mcp.find_costs([tuple(s)], [tuple(g)])
-    if not np.isfinite(cum[tuple(g)]):
-        return None
-    cells = np.asarray(mcp.traceback(tuple(g)))
-    pts = grid.cell_to_world(cells)
-    pts[0], pts[-1] = start_xy, goal_xy
-    return shortcut(pts, cost, grid)
+    with _freed(costmap, [start_xy, goal_xy], r_free) as cost:
+        if not (np.isfinite(cost[tuple(s)]) and np.isfinite(cost[tuple(g)])):
+            return None
+        _, (cells,), _ = search(cost, s, g[None])
+        if cells is None:
+            return None
+        pts = grid.cell_to_world(cells)
+        pts[0], pts[-1] = start_xy, goal_xy
+        return shortcut(pts, cost, grid)
 
 
 def paths_from(
-    costmap: Costmap, start_xy, goals_xy, *, costs: list | None = None
+    costmap: Costmap,
+    start_xy,
+    goals_xy,
+    *,
+    costs: list | None = None,
+    budget: int | None = None,
+    expanded: list | None = None,
 ) -> list[np.ndarray | None]:
-    """Least-cost paths from one start to many goals with a single Dijkstra run.
+    """Least-cost paths from one start to many goals with a single search.
 
     ``costs``: if given (a list), the accumulated cost of each path (``inf`` for none) is
-    appended to it, in metres weighted by the cells' costs.
+    appended to it, in metres weighted by the cells' costs. ``budget``: at most this many
+    cells are expanded (goals not reached by then get None). ``expanded``: if given (a list),
+    the number of cells expanded is appended to it (the work done, for planning budgets).
     """
     grid = costmap.grid
     start_xy = np.asarray(start_xy, float)
     goals_xy = np.asarray(goals_xy, float).reshape(-1, 2)
-    cost = _free_disc(costmap.cost, grid, start_xy, costmap.inscribed_m)
-    for g in goals_xy:
-        cost = _free_disc(cost, grid, g, costmap.inscribed_m)
+    out: list[np.ndarray | None] = [None] * len(goals_xy)
+    found = np.full(len(goals_xy), np.inf)
     s = grid.world_to_cell(start_xy[None])[0]
-    if not grid.in_bounds(s[None])[0] or not np.isfinite(cost[tuple(s)]):
-        if costs is not None:
-            costs += [np.inf] * len(goals_xy)
-        return [None] * len(goals_xy)
-    mcp = MCP_Geometric(cost, fully_connected=True)
-    # The flood stops once every goal cell is reached (the same costs and paths to them as a
-    # full flood: Dijkstra settles a cell for good when it first pops it).
     cells = grid.world_to_cell(goals_xy)
-    ends = [tuple(g) for g in cells if grid.in_bounds(g[None])[0]]
-    cum, _ = mcp.find_costs([tuple(s)], ends or None)
-    out: list[np.ndarray | None] = []
-    for g_xy, g in zip(goals_xy, cells, strict=True):
-        if not grid.in_bounds(g[None])[0] or not np.isfinite(cum[tuple(g)]):
-            out.append(None)
-            if costs is not None:
-                costs.append(np.inf)
-            continue
-        if costs is not None:
-            costs.append(float(cum[tuple(g)]) * grid.resolution_m)
-        pts = grid.cell_to_world(np.asarray(mcp.traceback(tuple(g))))
-        pts[0], pts[-1] = start_xy, g_xy
-        out.append(pts)
+    inb = grid.in_bounds(cells)
+    work = 0
+    with _freed(costmap, np.vstack([start_xy[None], goals_xy]), costmap.inscribed_m) as cost:
+        if grid.in_bounds(s[None])[0] and np.isfinite(cost[tuple(s)]) and inb.any():
+            ends = np.flatnonzero(inb)
+            c, p, work = search(
+                cost, s, cells[ends], budget=(1 << 62) if budget is None else budget
+            )
+            for k, cost_k, cells_k in zip(ends.tolist(), c, p, strict=True):
+                if cells_k is None:
+                    continue
+                found[k] = cost_k * grid.resolution_m
+                pts = grid.cell_to_world(cells_k)
+                pts[0], pts[-1] = start_xy, goals_xy[k]
+                out[k] = pts
+    if costs is not None:
+        costs += found.tolist()
+    if expanded is not None:
+        expanded.append(work)
     return out
 
 

@@ -428,21 +428,42 @@ class CommandsMixin:
         for g in self.groups:
             if g.cost == "sequential" or len(g.robots) < 2:
                 continue
-            fps = [self.info.footprints[i] for i in g.robots]
-            fits = assign_mod.footprint_fits([(f.length_m, f.width_m) for f in fps], g.goal_dims)
             if g.cost == "path":
                 continue  # path costs are recomputed on replans only (Dijkstra per goal)
-            cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
+            fps = [self.info.footprints[i] for i in g.robots]
+            dims = [(f.length_m, f.width_m) for f in fps]
             pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[g.goal_of])
             locked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
-            try:
-                new, changed = assign_mod.reassign(cost, g.goal_of, locked)
-            except assign_mod.AssignmentError:
-                continue
+            if len(g.robots) > assign_mod.LOCAL_REASSIGN_ABOVE:
+                new, changed = self._reassign_local(g, dims, locked)
+            else:
+                fits = assign_mod.footprint_fits(dims, g.goal_dims)
+                cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
+                try:
+                    new, changed = assign_mod.reassign(cost, g.goal_of, locked)
+                except assign_mod.AssignmentError:
+                    continue
             if changed:
                 g.switches += int(np.sum(new != g.goal_of))
                 g.goal_of = new
                 self._set_goals(g.robots, g.goals[new])
+
+    def _reassign_local(self, g, dims, locked) -> tuple[np.ndarray, bool]:
+        """A large group's re-assignment by swaps between neighbours (O(n k), not O(n^3))."""
+        rd, gd = np.asarray(dims, float), np.asarray(g.goal_dims, float).reshape(-1, 2)
+
+        def fits(rows, cols):
+            tol = 1e-9
+            return (rd[rows, 0] <= gd[cols, 0] + tol) & (rd[rows, 1] <= gd[cols, 1] + tol)
+
+        return assign_mod.reassign_local(
+            self.poses_known[g.robots, :2],
+            g.goals[:, :2],
+            g.goal_of,
+            g.cost,
+            fits=fits if len(gd) else None,
+            locked=locked,
+        )
 
     def hold_zones(self) -> list:
         zones: list = [None] * self.n

@@ -135,6 +135,11 @@ class Supervisor(CommandsMixin):
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
         )
+        # Per-map work of the controller (costmaps, bottleneck zones) done at load, so the
+        # first tick (often a park command for the whole fleet) does not carry it.
+        prepare = getattr(self.controller, "prepare", None)
+        if prepare is not None:
+            prepare(self.view())
 
     # ------------------------------------------------------------------ state
 

@@ -18,6 +18,16 @@ from swarmpark.core.progress import remaining_m
 
 __all__ = ["PotentialField"]
 
+
+def _ball_pairs(kd: cKDTree, xy: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (query row, point) pairs of a ball query of ``kd`` at ``xy`` with radii ``r``, by
+    row and then point index (as the sorted lists of ``query_ball_point``)."""
+    hits = kd.query_ball_point(xy, r)
+    lens = np.fromiter(map(len, hits), int, len(hits))
+    pt = np.fromiter(itertools.chain.from_iterable(hits), int, int(lens.sum()))
+    return np.repeat(np.arange(len(xy)), lens), pt
+
+
 #: Owner codes of repulsion points that are not skids.
 _STATIC, _PERSON = -1, -2
 
@@ -37,6 +47,7 @@ class PotentialField:
     def __init__(self, params: FieldParams, *, dynamic: bool = True) -> None:
         self.params = params
         self.dynamic = dynamic
+        self._outline = None  # the SkidOutlines the per-skid point ranges below are for
 
     def drive(
         self,
@@ -112,10 +123,47 @@ class PotentialField:
         out_r[: len(rear)] = rear
         return out_f, out_r
 
+    def _dynamic_pairs(self, view, idx, skids, dyn, r):
+        """The (robot row, point) pairs of robots ``idx`` and the dynamic points ``dyn`` (the
+        skids' outline points, then people) within ``r`` ``(len(idx),)``, as a ball query
+        (:func:`_ball_pairs`) gives them. Only the outlines of skids whose pivots are near are
+        measured, instead of a tree of every outline point each tick."""
+        n_pts = len(skids.points)
+        if self._outline is not skids:
+            # Per skid: its points' index range and their reach about its pivot.
+            self._outline = skids
+            starts = np.searchsorted(skids.owner, np.arange(len(skids.reach)))
+            self._starts = starts
+            self._counts = np.diff(np.append(starts, n_pts))
+            self._rad = np.zeros(len(skids.reach))
+            np.maximum.at(self._rad, skids.owner, np.hypot(*skids.points.T))
+        here = view.poses[idx, :2]
+        rob_l, pt_l = [], []
+        if n_pts and len(dyn) >= n_pts:
+            near = cKDTree(view.poses[:, :2]).sparse_distance_matrix(
+                cKDTree(here), float(r.max() + self._rad.max()), output_type="ndarray"
+            )
+            sk, rb = near["i"].astype(int), near["j"].astype(int)
+            cnt = self._counts[sk]
+            rob = np.repeat(rb, cnt)
+            first = np.repeat(self._starts[sk] - np.cumsum(cnt) + cnt, cnt)
+            pt = first + np.arange(len(rob))
+            rob_l.append(rob)
+            pt_l.append(pt)
+        if len(dyn) > n_pts:  # people: few, every pair
+            rob, k = np.divmod(np.arange(len(idx) * (len(dyn) - n_pts)), len(dyn) - n_pts)
+            rob_l.append(rob)
+            pt_l.append(n_pts + k)
+        rob, pt = np.concatenate(rob_l), np.concatenate(pt_l)
+        d = dyn[pt] - here[rob]
+        keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= r[rob] * r[rob]
+        rob, pt = rob[keep], pt[keep]
+        order = np.lexsort((pt, rob))
+        return rob[order], pt[order]
+
     def _neighbours(self, view, idx, scene: Scene, influence):
         """Repulsion points within reach of each robot: (robot row, point index, whether the
         point is dynamic, its owner, the dynamic points), or ``rob=None`` when there are none."""
-        n_act = len(idx)
         skids = scene.skids
         # Other skids' outlines in the world, and people (their rims are handled later).
         robot_pts = transform_points(view.poses[skids.owner], skids.points[:, None, :])[:, 0]
@@ -125,19 +173,20 @@ class PotentialField:
             dyn, dyn_owner = dyn[:0], dyn_owner[:0]
         reach = skids.reach[idx] + influence
         rob_l, pt_l, src_l = [], [], []
-        sources = [(scene.static.kd, reach, 0)]
+        if scene.static.kd is not None:
+            rob, pt = _ball_pairs(scene.static.kd, view.poses[idx, :2], reach)
+            rob_l.append(rob)
+            pt_l.append(pt)
+            src_l.append(np.zeros(len(pt), int))
         if len(dyn):
             rim = view.people_radius.max(initial=0.0)
-            sources.append((cKDTree(dyn), reach + rim, 1))
-        for kd, r, src in sources:
-            if kd is None:
-                continue
-            hits = kd.query_ball_point(view.poses[idx, :2], r)
-            lens = np.fromiter((len(h) for h in hits), int, len(hits))
-            if lens.sum():
-                rob_l.append(np.repeat(np.arange(n_act), lens))
-                pt_l.append(np.fromiter(itertools.chain.from_iterable(hits), int, lens.sum()))
-                src_l.append(np.full(lens.sum(), src, int))
+            rob, pt = self._dynamic_pairs(view, idx, skids, dyn, reach + rim)
+            rob_l.append(rob)
+            pt_l.append(pt)
+            src_l.append(np.ones(len(pt), int))
+        rob_l = [a for a in rob_l if len(a)]
+        pt_l = [a for a in pt_l if len(a)]
+        src_l = [a for a in src_l if len(a)]
         if not rob_l:
             return None, None, None, None, dyn
         rob, pt, src = np.concatenate(rob_l), np.concatenate(pt_l), np.concatenate(src_l)

@@ -118,6 +118,16 @@ class Navigator:
     def _states(self, name: str) -> list:
         return [getattr(r, name) for r in self.robots]
 
+    def prepare(self, view: ControlView) -> None:
+        """Per-map work done before the first tick (the supervisor calls it at load): the
+        scene's outlines, each footprint's costmap and the bottleneck zones. Each is kept
+        until the map or the fleet changes, so the ticks give the same commands as without."""
+        self.scene.update(view)
+        for fp in view.footprints:
+            self.planner.costmap(view, fp)
+        if self.params.traffic.enabled:
+            self.traffic.prepare(view)
+
     # ------------------------------------------------------------------ the tick
 
     def compute(self, view: ControlView) -> np.ndarray:

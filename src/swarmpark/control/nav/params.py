@@ -97,6 +97,11 @@ class PlannerParams:
     #: At most this many paths are planned in one tick (a park command for a hundred skids
     #: must not stall the loop).
     max_plans_per_tick: int = 8
+    #: And no more plans in a tick once their searches have expanded this many grid cells
+    #: (the first plan of a tick always runs): a plan's work depends on the map and the way,
+    #: so a park command for hundreds of skids on a large map must not stall the loop either
+    #: (about 25 ms of search on one core; a suite plan expands a few thousand cells).
+    max_plan_cells_per_tick: int = 150_000
     #: Paths are searched on the map coarsened to this resolution (conservatively); None
     #: searches at the map's own resolution. Coarser plans are faster (see the nav.plan
     #: benchmark) but narrow the passages by up to a cell, which costs time in tight spaces.
@@ -107,6 +112,7 @@ class PlannerParams:
 
     def __post_init__(self) -> None:
         _check(self, {"replan_period_s": ">0", "max_plans_per_tick": "int>0"})
+        _check(self, {"max_plan_cells_per_tick": "int>0"})
         _check(self, {"staging_check_points": "int>0"})
         if self.plan_resolution_m is not None:
             _check(self, {"plan_resolution_m": ">0"})

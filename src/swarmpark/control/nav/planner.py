@@ -9,7 +9,7 @@ from swarmpark.control.base import ControlView
 from swarmpark.control.nav.fleetmap import (
     FleetState,
     blocking,
-    fleet_costmap,
+    fleet_layers,
     points_in_rects,
     run_extra,
 )
@@ -100,10 +100,14 @@ class Planner:
             stuck = self._stuck(view, states, fleet, rows, left)
             repair = (self._blocked(view, states, fleet, rows, left) | stuck) - set(wanted)
             wanted = sorted(set(wanted) | repair)
-        # A bounded number of plans per tick (longest waiting first), so a park command for a
-        # hundred skids does not stall the loop; the others wait for their path.
+        # A bounded number of plans per tick (longest waiting first), and a bounded search
+        # effort (cells expanded), so a park command for hundreds of skids does not stall the
+        # loop; the others wait for their path.
         wanted.sort(key=lambda i: (states[i].planned_t, i))
+        work: list[int] = []
         for i in wanted[: p.max_plans_per_tick]:
+            if sum(work) >= p.max_plan_cells_per_tick:
+                break
             st = states[i]
             goal = view.goals[i]
             cm = self.costmap(view, view.footprints[i])
@@ -113,11 +117,11 @@ class Planner:
                 # the skids standing still and, if it can, off the spots still to be filled.
                 parked = fleet.parked | (fleet.still if i in stuck else False)
                 bound = fleet.bound if i in stuck else np.zeros_like(fleet.bound)
-                fcm = fleet_costmap(cm, view, i, parked, bound, self.fleet_params)
                 extra = run_extra(view, i, parked, bound, self.fleet_params)
-                path = self.plan(fcm, view.poses[i], goal, extra)
+                with fleet_layers(cm, view, i, parked, bound, self.fleet_params) as fcm:
+                    path = self.plan(fcm, view.poses[i], goal, extra, work=work)
             if path is None:  # no way around the fleet: the static map's (avoidance copes)
-                path = self.plan(cm, view.poses[i], goal)
+                path = self.plan(cm, view.poses[i], goal, work=work)
             st.path, st.path_goal, st.planned_t = path, goal.copy(), view.t
             st.best_left_m, st.best_t = np.inf, view.t
             st.failed = path is None
@@ -185,7 +189,7 @@ class Planner:
         return out
 
     def plan(
-        self, cm: Costmap, pose: np.ndarray, goal: np.ndarray, run_extra=None
+        self, cm: Costmap, pose: np.ndarray, goal: np.ndarray, run_extra=None, *, work=None
     ) -> np.ndarray | None:
         """A path that ends with a straight run along the goal's axis.
 
@@ -193,18 +197,22 @@ class Planner:
         (behind it, to drive in forwards, or in front of it, to back in: whichever is shorter,
         or on the fleet layers costs less, the run included) and the goal is appended, so the
         skid arrives aligned. Falls back to a direct path when neither staging point can be
-        reached or the skid is already close. ``run_extra(points)``: the extra cost per metre the fleet layers add
-        along a run (``inf``: blocked by a parked skid).
+        reached or the skid is already close. ``run_extra(points)``: the extra cost per metre the
+        fleet layers add along a run (``inf``: blocked by a parked skid). ``work``: if given (a
+        list), the number of grid cells the search expanded is appended to it.
         """
         axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
         stages = [goal[:2] + side * self.staging_m * axis for side in (-1.0, 1.0)]
-        # One Dijkstra run serves the direct path and both staging points.
+        # One search serves the direct path and both staging points.
         costs: list[float] = []
-        direct, *heads = paths_from(cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs)
-        if direct is not None:
-            direct = shortcut(direct, cm.cost, cm.grid)
-        if direct is None or np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
-            return direct
+        direct, *heads = paths_from(
+            cm, pose[:2], np.vstack([goal[:2], *stages]), costs=costs, expanded=work
+        )
+        # The direct path is shortcut only if it is the one returned.
+        if direct is None:
+            return None
+        if np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
+            return shortcut(direct, cm.cost, cm.grid)
         best, best_cost = None, np.inf
         for stage, head, c in zip(stages, heads, costs[1:], strict=True):
             run = self._run_cost(cm, goal, stage, run_extra)
@@ -216,7 +224,7 @@ class Planner:
             total = path_length(cand) if run_extra is None else c + run
             if total < best_cost:
                 best, best_cost = cand, total
-        return best if best is not None else direct
+        return best if best is not None else shortcut(direct, cm.cost, cm.grid)
 
     def _run_cost(self, cm: Costmap, goal: np.ndarray, stage: np.ndarray, run_extra) -> float:
         """Cost of the straight run from the staging point to the goal: its length, times

@@ -54,6 +54,10 @@ class TrafficControl:
         self._fps = None
         self.zones: Bottlenecks | None = None
 
+    def prepare(self, view: ControlView) -> None:
+        """Find the map's bottlenecks now (before the first tick)."""
+        self._zones(view)
+
     def _zones(self, view: ControlView) -> Bottlenecks:
         """The map's bottlenecks for this fleet (recomputed when the map or fleet changes)."""
         fps = tuple(view.footprints)
