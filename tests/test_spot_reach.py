@@ -91,8 +91,15 @@ def test_park_report_names_a_spot_behind_a_tight_corner():
         heading_deg=0,
         margin_m=0.05,
     )
-    out = sup.park(cmd)
+    # The operator's way (a preview or park from the server, prepared off the tick).
+    out = sup.apply_park(sup.prepare_park(cmd))
     assert out.accepted, out.reason
     (flag,) = out.detail["unreachable_spots"]
     assert flag["spot"] == 0 and "no manoeuvre" in flag["reason"]
     assert any("no manoeuvre" in n for n in sup.groups[0].report["notices"])
+    # A scripted park inside the tick: the check runs with the run's metrics afterwards.
+    sup2 = Supervisor(world)
+    out = sup2.park(cmd)
+    assert out.accepted and "unreachable_spots" not in out.detail
+    (late,) = sup2.metrics.unreachable_spots
+    assert late["spot"] == 0 and late["t_s"] == 0.0 and late["reason"] == flag["reason"]

@@ -22,6 +22,7 @@ from swarmpark.core.progress import (
     remaining_m,
 )
 from swarmpark.plan.grid import build_costmap, path_length_matrix
+from swarmpark.plan.spot_reach import as_report, spot_reach
 
 __all__ = [
     "POSITION_TOL_M",
@@ -95,6 +96,7 @@ class MetricsRecorder:
         # The lower bound is not needed to act: the inputs of each park command are kept and
         # it is computed (once) when asked for, outside the control tick.
         self._bound_inputs: list[tuple] = []
+        self._spot_checks: list[tuple] = []
         self._bound: float | None = None
         self.path_length = np.zeros(n)
         self._prev = np.asarray(self.start_poses, float).copy()
@@ -131,6 +133,23 @@ class MetricsRecorder:
                 np.array(max_speed_mps, float),
             )
         )
+
+    def defer_spot_check(self, t_s: float, where: tuple, footprints: list, fill_order) -> None:
+        """Keep a park command's layout for the manoeuvre check of its spots
+        (:func:`swarmpark.plan.spot_reach.spot_reach`; ``where``: occupied cells, origin,
+        resolution, spot poses), run by :attr:`unreachable_spots` after the run, not inside
+        the control tick."""
+        self._spot_checks.append((float(t_s), where, list(footprints), tuple(fill_order)))
+
+    @property
+    def unreachable_spots(self) -> list[dict]:
+        """The spots of the run's park commands that no manoeuvre reaches in fill order, each
+        with the time of its command (``t_s``)."""
+        out = []
+        for t_s, (occupied, origin, res, goals), fps, order in self._spot_checks:
+            flags = spot_reach(occupied, origin, res, goals, fps, order)
+            out += [{"t_s": round(t_s, 3), **f} for f in as_report(flags)]
+        return out
 
     @property
     def lower_bound(self) -> float | None:
@@ -270,6 +289,7 @@ class MetricsRecorder:
             else round(self.min_clearance_static, 4),
             "path_length_m": {rid: robots[rid]["path_length_m"] for rid in self.ids},
             "deadlocks": [d.as_dict() for d in self.deadlocks],
+            "unreachable_spots": self.unreachable_spots,
             "tick_ms": {
                 "mean": round(float(ticks.mean()), 4),
                 "p99": round(float(np.percentile(ticks, 99)), 4),

@@ -23,7 +23,7 @@ from scipy.signal import fftconvolve
 from swarmpark.core.geometry import Footprint
 from swarmpark.plan.lattice import HEADING_STEPS, HEADINGS, rect_mask, snap_state, stamp_footprint
 
-__all__ = ["SpotReach", "spot_reach"]
+__all__ = ["SpotReach", "as_report", "spot_reach"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,23 @@ class SpotReach:
     spot: int
     pose: tuple[float, float, float]
     reason: str
+
+
+def as_report(flags: list[SpotReach]) -> list[dict]:
+    """The flags for people and JSON: ``spot``, ``pose`` ``[x_m, y_m, heading_deg]``,
+    ``reason``."""
+    return [
+        {
+            "spot": f.spot,
+            "pose": [
+                round(f.pose[0], 3),
+                round(f.pose[1], 3),
+                round(float(np.degrees(f.pose[2])), 1),
+            ],
+            "reason": f.reason,
+        }
+        for f in flags
+    ]
 
 
 @njit(cache=True)

@@ -21,7 +21,7 @@ from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
-from swarmpark.plan.spot_reach import spot_reach
+from swarmpark.plan.spot_reach import as_report, spot_reach
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
 
@@ -60,6 +60,8 @@ class ParkPlan:
     #: The inputs of the run's lower bound on the time to park (computed lazily by the
     #: metrics, outside the control tick: :meth:`MetricsRecorder.defer_lower_bound`).
     bound_inputs: tuple
+    #: Whether the manoeuvre check of the spots ran (else the metrics run it after the run).
+    reach_checked: bool = True
 
 
 @dataclass
@@ -166,13 +168,16 @@ class CommandsMixin:
         return unary_union(parts) if parts else None
 
     def park(self, cmd: ParkCmd) -> Outcome:
-        """Lay out goals in the boundary and assign them to the robots (all or nothing)."""
-        return self.apply_park(self.prepare_park(cmd))
+        """Lay out goals in the boundary and assign them to the robots (all or nothing).
+        This runs inside the control tick, so the manoeuvre check of the spots is left to
+        the run's metrics (``unreachable_spots`` in the result)."""
+        return self.apply_park(self.prepare_park(cmd, check_reach=False))
 
-    def prepare_park(self, cmd: ParkCmd) -> ParkPlan | str:
+    def prepare_park(self, cmd: ParkCmd, *, check_reach: bool = True) -> ParkPlan | str:
         """The heavy half of :meth:`park` (layout, costs, fill-order blockers, the lower
-        bound): reads the supervisor, changes nothing, so a server can run it off its sim
-        thread. Returns the plan or the reason it cannot be made."""
+        bound, with ``check_reach`` the spots no manoeuvre reaches): reads the supervisor,
+        changes nothing, so a server can run it off its sim thread. Returns the plan or the
+        reason it cannot be made."""
         try:
             idx, boundary, lay = self.plan_layout(cmd)
         except (ValueError, GeometryError) as exc:
@@ -180,7 +185,8 @@ class CommandsMixin:
         goals = np.asarray(lay.poses, float)
         fps = [self.info.footprints[i] for i in idx]
         report = dict(lay.report)
-        self._flag_unreachable(report, goals, fps, tuple(lay.fill_order))
+        if check_reach:
+            self._flag_unreachable(report, goals, fps, tuple(lay.fill_order))
         fits = assign_mod.footprint_fits(
             [(f.length_m, f.width_m) for f in fps], [(f.length_m, f.width_m) for f in fps]
         )
@@ -208,7 +214,7 @@ class CommandsMixin:
             min(f.width_m for f in fps) / 2,
             self.info.max_speed_mps[idx],
         )
-        return ParkPlan(group, bound_inputs)
+        return ParkPlan(group, bound_inputs, check_reach)
 
     def _flag_unreachable(self, report: dict, goals: np.ndarray, fps, order) -> None:
         """Flag, in the layout report, the spots no manoeuvre gets a skid into in fill order
@@ -224,14 +230,7 @@ class CommandsMixin:
         flagged = spot_reach(grid.occupied, grid.origin, grid.resolution_m, goals, fps, order)
         if not flagged:
             return
-        report["unreachable_spots"] = [
-            {
-                "spot": f.spot,
-                "pose": [round(f.pose[0], 3), round(f.pose[1], 3), round(np.degrees(f.pose[2]), 1)],
-                "reason": f.reason,
-            }
-            for f in flagged
-        ]
+        report["unreachable_spots"] = as_report(flagged)
         report["notices"] = list(report.get("notices", [])) + [
             f"spot {f.spot} at ({f.pose[0]:.2f}, {f.pose[1]:.2f}): {f.reason}" for f in flagged
         ]
@@ -251,6 +250,14 @@ class CommandsMixin:
         goals = group.goals
         self._set_goals(idx, goals[group.goal_of])
         self.metrics.defer_lower_bound(*plan.bound_inputs)
+        if not plan.reach_checked and len(goals) <= MAX_REACH_CHECKED:
+            grid = self.world.grid
+            self.metrics.defer_spot_check(
+                self.t,
+                (grid.occupied, grid.origin, grid.resolution_m, np.array(goals)),
+                [self.info.footprints[i] for i in idx],
+                group.fill_order,
+            )
         extra = {}
         if group.report.get("unreachable_spots"):
             extra["unreachable_spots"] = group.report["unreachable_spots"]
