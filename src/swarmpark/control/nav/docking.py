@@ -132,6 +132,10 @@ class Docking:
             return self._turn(view, i, e_yaw)
         if not (close and abs(e_yaw) < p.align_first_rad):
             st.runup = False
+            if st.settled:
+                # Pushed off its spot (RVO makes room along the axis): it drives back along
+                # the axis; a back-up there only fights whoever pushed it.
+                return None
             return self.backup.step(back, stall, raw[0], view.vel[i, 0], view.dt, view.max_speed[i])
         return self._axis_law(view, i, e, st, stall)
 

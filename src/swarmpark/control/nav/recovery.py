@@ -46,8 +46,6 @@ __all__ = [
 
 #: Below this measured speed a skid backing up is not moving (odometry noise floor).
 _MOVING_MPS = 1e-3
-#: A back-up blocked before covering this share of its distance was futile (see BackUp).
-_FUTILE_SHARE = 0.1
 
 
 def axis_away(view: ControlView, i: int, j: int) -> float:
@@ -112,11 +110,6 @@ class BackUp:
             return None
         st.left_m -= max(abs(v_now) * dt, 0.0) if abs(v_now) > _MOVING_MPS else 0.0
         if stall.stalled_s >= self.stall_s:  # backing is blocked too
-            if st.left_m > (1.0 - _FUTILE_SHARE) * self.params.distance_m:
-                # It could hardly back at all: give the field its own ``stall_s`` to try before
-                # the next back-up (else a skid boxed in from behind backs up for ever and
-                # never drives on to a free goal ahead).
-                stall.stalled_s = 0.0
             st.left_m = 0.0
         return (-np.sign(raw_v + 1e-9) * self.params.speed_share * v_max, 0.0)
 
