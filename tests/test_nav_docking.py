@@ -116,6 +116,18 @@ def test_outside_the_manoeuvre_keeps_the_field_command():
     assert h.backups[0].left_m == BackUpParams().distance_m
 
 
+def test_a_settled_skid_pushed_far_off_its_spot_drives_back_and_never_backs_up():
+    """RVO made room with it: 2 m behind its spot, held still by whoever pushed it there
+    (behind it), it keeps the field's command towards its spot instead of backing into them."""
+    h = Harness()
+    h.step(make_view([[5.0, 3.0, 0.0]], [GOAL]))
+    assert h.docks[0].settled
+    raw = np.array([[0.5, 0.0]])
+    h.stalls[0].stalled_s = 2.0
+    cmd = h.step(make_view([[3.0, 3.0, 0.0]], [GOAL]), raw=raw)
+    assert np.array_equal(cmd, raw) and h.backups[0].left_m == 0.0
+
+
 @pytest.mark.parametrize("start", [[4.2, 3.06, 0.05], [5.5, 2.95, -0.08], [4.95, 3.12, 0.0]])
 def test_a_skid_beside_its_goal_docks(start):
     h = Harness()
