@@ -136,14 +136,7 @@ class LocalCostmap:
         h, w = self.grid.shape
         if self.config.clear_on_pass and len(self._keys):
             self._clear_passed(poses, ranges)
-        pts = scan_points(self.spec, poses, ranges)  # (N, B, 2)
-        returned = np.isfinite(ranges) & (ranges < self.spec.max_range_m)
-        robot = np.broadcast_to(np.arange(self.n_robots)[:, None], ranges.shape)[returned]
-        rc = self.grid.world_to_cell(pts[returned])
-        inside = self.grid.in_bounds(rc)
-        robot, rc = robot[inside], rc[inside]
-        unexplained = self._dist[rc[:, 0], rc[:, 1]] > self.config.map_tolerance_m
-        robot, rc = robot[unexplained], rc[unexplained]
+        robot, rc, _ = self._unexplained(poses, ranges)
         new = np.unique(robot.astype(np.int64) * self._cells + rc[:, 0] * w + rc[:, 1])
         # Old entries not re-observed keep their time; re-observed and new ones get t.
         old = ~np.isin(self._keys, new, assume_unique=True)
@@ -153,6 +146,26 @@ class LocalCostmap:
         seen = np.concatenate([self._seen[keep], np.full(len(new), float(t))])
         order = np.argsort(keys, kind="stable")
         self._keys, self._seen = keys[order], seen[order]
+
+    def _unexplained(self, poses: np.ndarray, ranges: np.ndarray):
+        """The scan end points the map does not explain: per point its skid ``(M,)``, cell
+        ``(M, 2)`` and world position ``(M, 2)``."""
+        pts = scan_points(self.spec, poses, ranges)  # (N, B, 2)
+        returned = np.isfinite(ranges) & (ranges < self.spec.max_range_m)
+        robot = np.broadcast_to(np.arange(self.n_robots)[:, None], ranges.shape)[returned]
+        xy = pts[returned]
+        rc = self.grid.world_to_cell(xy)
+        inside = self.grid.in_bounds(rc)
+        robot, rc, xy = robot[inside], rc[inside], xy[inside]
+        unexplained = self._dist[rc[:, 0], rc[:, 1]] > self.config.map_tolerance_m
+        return robot[unexplained], rc[unexplained], xy[unexplained]
+
+    def unexplained_points(self, poses: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+        """World end points ``(M, 2)`` of the scans ``ranges`` ``(N, B)`` taken at ``poses``
+        that the map does not explain (what a people tracker clusters)."""
+        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+        ranges = np.asarray(ranges, dtype=float).reshape(self.n_robots, self.spec.num_beams)
+        return self._unexplained(poses, ranges)[2]
 
     def _clear_passed(self, poses: np.ndarray, ranges: np.ndarray) -> None:
         """Forget marked cells that a beam of the same skid has just passed through."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpark.core.geometry import pad_polygons, triangulate
-from swarmpark.links.base import FleetInfo, Inbox
+from swarmpark.links.base import FleetInfo, Inbox, TrackedPeople
 from swarmpark.world.scenario import World
 
 __all__ = [
@@ -23,6 +23,9 @@ __all__ = [
     "ESTIMATE_JUMP_M",
     "DETECTION_PLAN_PERIOD_S",
     "DETECTION_SQUARE_M",
+    "PERSON_RADIUS_M",
+    "PERSON_MOVED_M",
+    "PERSON_MAX_SPEED_MPS",
 ]
 
 #: Beams of each scan scored by the particle filter (a subsample, as AMCL's max_beams).
@@ -35,6 +38,14 @@ DETECTION_PLAN_PERIOD_S = 1.0
 #: Detected obstacle cells go to the reactive layer (potential field, collision monitor, ORCA)
 #: as static solids: one square of this size for each square holding detected cells.
 DETECTION_SQUARE_M = 0.1
+#: Tracked people are given to navigation with this radius (the tracker sees centroids).
+PERSON_RADIUS_M = 0.25
+#: A track is a person once it has moved this far from where it was first seen: crates and
+#: parts of the map the scans see differently never move, so they stay detections only.
+PERSON_MOVED_M = 0.5
+#: ... and never faster than this (people walk at up to about 2 m/s): the centroid of the
+#: visible part of a crate's edge slides along it as a skid drives by, at 2-3 m/s.
+PERSON_MAX_SPEED_MPS = 2.0
 
 
 class OnboardSensing:
@@ -91,6 +102,14 @@ class OnboardSensing:
         self._wall_pieces = pieces[np.array([o == "wall" for o in owners])]
         self._detected_squares = np.zeros((0, 2), dtype=np.int64)
         self.static_view = self._wall_pieces  # walls and detected squares, for the view
+        from swarmpark.sense.tracking import PeopleTracker
+
+        self.tracker = PeopleTracker()
+        self._movers: set[int] = set()
+        self._phantoms: set[int] = set()  # tracks too fast for a person, ever
+        z = np.zeros((0, 2))
+        #: The people the tracker follows (tracks that moved), as the link's message.
+        self.people = TrackedPeople(0.0, z, z.copy(), np.zeros(0))
 
     @property
     def detected_squares(self) -> np.ndarray:
@@ -131,6 +150,7 @@ class OnboardSensing:
         others = self.localizer.other_skid_beams(ranges)
         seen = ranges if others is None else np.where(others, np.nan, ranges)
         self.costmap.update(t, self.estimates, seen)
+        self._track_people(t, self.costmap.unexplained_points(self.estimates, seen))
         cells = np.concatenate([self.costmap.obstacles(i, t).cells for i in range(self.n)])
         grid = self._base_grid
         pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
@@ -169,6 +189,24 @@ class OnboardSensing:
                         grid.cell_to_world(np.argwhere(appeared)), has_goal, paths(), half_widths
                     )
         return replan
+
+    def _track_people(self, t: float, points: np.ndarray) -> None:
+        """Feed the fleet's people tracker (:mod:`swarmpark.sense.tracking`) with the points
+        the map does not explain and publish the tracks that have moved as people (with
+        their velocities: navigation predicts them)."""
+        tracks = self.tracker.update(t, points)
+        for tr in tracks:
+            if np.hypot(*tr.state[2:]) > PERSON_MAX_SPEED_MPS:
+                self._phantoms.add(tr.id)
+            elif np.hypot(*(tr.state[:2] - tr.history[0][1:])) >= PERSON_MOVED_M:
+                self._movers.add(tr.id)
+        people = [tr for tr in tracks if tr.id in self._movers and tr.id not in self._phantoms]
+        live = {tr.id for tr in self.tracker.tracks}
+        self._movers &= live
+        self._phantoms &= live
+        xy = np.array([tr.state[:2] for tr in people]).reshape(-1, 2)
+        vel = np.array([tr.state[2:] for tr in people]).reshape(-1, 2)
+        self.people = TrackedPeople(t, xy, vel, np.full(len(people), PERSON_RADIUS_M))
 
     def _blocked_paths(self, new_xy: np.ndarray, has_goal, paths, half_widths) -> np.ndarray:
         """Skids whose planned path (the part still ahead) runs within a skid's half width

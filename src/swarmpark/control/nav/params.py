@@ -497,8 +497,12 @@ class PeopleParams:
     #: A person's walk is predicted this far ahead at constant velocity (a skid needs about
     #: 2 s to back its own length out of the way; 3 s leaves room for the tracker's lag).
     horizon_s: float = 3.0
-    #: Skids keep this far from the predicted walk (the tracker's error plus a margin).
+    #: Skids on the move keep this far from the predicted walk (the tracker's error plus a
+    #: margin) ...
     clearance_m: float = 0.3
+    #: ... but a skid standing (parked, or waiting) steps aside only when the person would
+    #: pass closer than this: stepping aside means docking again.
+    aside_clearance_m: float = 0.05
     #: People slower than this stand: they may set off any way, so skids keep an extra
     #: ``standing_berth_m`` from them (the tracker's velocity noise is about 0.1 m/s).
     walking_mps: float = 0.3
@@ -523,8 +527,13 @@ class PeopleParams:
         _check(self, {"horizon_s": ">0", "clearance_m": ">=0", "walking_mps": ">0"})
         _check(self, {"standing_berth_m": ">=0", "rollout_s": ">0", "rollout_samples": "int>0"})
         _check(self, {"sample_step_m": ">0", "shift_step_m": ">0", "gain_per_s": ">0"})
-        _check(self, {"overshoot_m": ">=0"})
+        _check(self, {"overshoot_m": ">=0", "aside_clearance_m": ">=0"})
         _order(self, "shift_step_m", "shift_max_m")
+        if not self.aside_clearance_m <= self.clearance_m:
+            raise ValueError(
+                "PeopleParams.aside_clearance_m must be at most clearance_m "
+                f"(got {self.aside_clearance_m!r} > {self.clearance_m!r})"
+            )
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -11,7 +11,7 @@ wider. Two rules then act on each skid's command, before the collision monitor:
   Navigation2's collision monitor scales commands, here against the predicted way instead of
   the person where they stand).
 * **Step aside**: a skid standing in a *walking* person's way (the person would walk into it
-  where it stands) drives along its own axis to the nearest place clear of the way, of static
+  where it stands, or pass closer than ``aside_clearance_m``) drives along its own axis to the nearest place clear of the way, of static
   solids and of the other skids, keeping the side it chose while it is in the way. The
   collision monitor checks that move against walls and skids but not against the person it
   leaves room for (its prediction would stop the skid right in the person's way).
@@ -108,6 +108,8 @@ class PeopleYield:
         self.times = np.linspace(p.rollout_s / p.rollout_samples, p.rollout_s, p.rollout_samples)
         n = int(round(p.shift_max_m / p.shift_step_m))
         self.steps = np.arange(1, n + 1) * p.shift_step_m
+        #: How far into a walk a skid may stand before it steps aside.
+        self._slack = p.clearance_m - p.aside_clearance_m
         #: Per skid, the side (+1 ahead, -1 back) it last stepped aside to, or 0.
         self.side = np.zeros(0, dtype=int)
 
@@ -178,7 +180,8 @@ class PeopleYield:
             return YieldResult(out, aside)
         corners = footprint_corners(view.poses[idx[rows]], scene.skids.plain[idx[rows]])
         gap_now = ways.gaps(corners)
-        in_walk = ((gap_now < 0) & ways.walking[None]).any(axis=1)
+        slack = self._slack
+        in_walk = ((gap_now < -slack) & ways.walking[None]).any(axis=1)
         for r in rows[in_walk]:
             v = self._step_aside(view, int(idx[r]), ways, scene)
             if v is not None:
@@ -234,7 +237,7 @@ class PeopleYield:
             # The way there must be clear of walls and skids; the end also of every way.
             blocked = self._blocked(view, i, corners, scene)
             passable = np.logical_and.accumulate(~blocked)
-            clear = passable & (ways.gaps(corners).min(axis=1) >= 0)
+            clear = passable & (ways.gaps(corners).min(axis=1) >= -self._slack)
             if clear.any():
                 k = int(np.argmax(clear))
                 t = _time_to_shift(shifts[k], view.vel[i, 0], view.max_accel[i], view.max_speed[i])
