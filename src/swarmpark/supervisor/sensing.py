@@ -67,7 +67,7 @@ class OnboardSensing:
 
     def __init__(self, world: World, info: FleetInfo, inbox: Inbox, base_grid) -> None:
         from swarmpark.sense.amcl import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
-        from swarmpark.sense.costmap import LocalCostmap
+        from swarmpark.sense.costmap import FleetLayer, LocalCostmap
         from swarmpark.sense.lidar import LidarSpec
 
         cfg = world.scenario.sensing
@@ -95,6 +95,7 @@ class OnboardSensing:
         self.estimates = self.localizer.estimates.copy()
         self._base_grid = base_grid
         self.costmap = LocalCostmap(base_grid, self.n, self.lidar_spec)
+        self.fleet_layer = FleetLayer(self.costmap)
         self.known_grid = base_grid.copy()
         self._detected_mask = np.zeros(base_grid.shape, dtype=bool)
         self._plan_grid_t = -np.inf
@@ -146,12 +147,14 @@ class OnboardSensing:
         """Feed the scans (less the returns from other skids, whose places the fleet knows) to
         the costmap at the estimated poses; refresh the solids the reactive layer avoids and,
         at :data:`DETECTION_PLAN_PERIOD_S`, the planner's map. Detections are shared by the
-        fleet (the union of every skid's costmap): the central controller plans for all."""
+        fleet (every skid's costmap merged, :class:`~swarmpark.sense.costmap.FleetLayer`: what
+        only a skid whose scans do not fit the map sees fades out): the central controller
+        plans for all."""
         others = self.localizer.other_skid_beams(ranges)
         seen = ranges if others is None else np.where(others, np.nan, ranges)
         self.costmap.update(t, self.estimates, seen)
         self._track_people(t, self.costmap.unexplained_points(self.estimates, seen))
-        cells = np.concatenate([self.costmap.obstacles(i, t).cells for i in range(self.n)])
+        cells = self.fleet_layer.merge(t)
         grid = self._base_grid
         pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
         squares = np.unique(np.floor(pts / DETECTION_SQUARE_M).astype(np.int64), axis=0)
