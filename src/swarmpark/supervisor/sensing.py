@@ -12,6 +12,7 @@ Nothing here sees the simulator's truth: only :class:`~swarmpark.links.base.Inbo
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from swarmpark.core.geometry import pad_polygons, triangulate
 from swarmpark.links.base import FleetInfo, Inbox, TrackedPeople
@@ -26,6 +27,7 @@ __all__ = [
     "PERSON_RADIUS_M",
     "PERSON_MOVED_M",
     "PERSON_MAX_SPEED_MPS",
+    "PERSON_LEFT_M",
 ]
 
 #: Beams of each scan scored by the particle filter (a subsample, as AMCL's max_beams).
@@ -46,6 +48,8 @@ PERSON_MOVED_M = 0.5
 #: ... and never faster than this (people walk at up to about 2 m/s): the centroid of the
 #: visible part of a crate's edge slides along it as a skid drives by, at 2-3 m/s.
 PERSON_MAX_SPEED_MPS = 2.0
+#: ... and where it was first seen is free of detections by then (within this distance).
+PERSON_LEFT_M = 0.2
 
 
 class OnboardSensing:
@@ -153,10 +157,10 @@ class OnboardSensing:
         others = self.localizer.other_skid_beams(ranges)
         seen = ranges if others is None else np.where(others, np.nan, ranges)
         self.costmap.update(t, self.estimates, seen)
-        self._track_people(t, self.costmap.unexplained_points(self.estimates, seen))
         cells = self.fleet_layer.merge(t)
         grid = self._base_grid
         pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
+        self._track_people(t, self.costmap.unexplained_points(self.estimates, seen), pts)
         squares = np.unique(np.floor(pts / DETECTION_SQUARE_M).astype(np.int64), axis=0)
         if not np.array_equal(squares, self._detected_squares):
             # Each square grown by half a cell covers the cells whose centres lie in it.
@@ -193,16 +197,24 @@ class OnboardSensing:
                     )
         return replan
 
-    def _track_people(self, t: float, points: np.ndarray) -> None:
+    def _track_people(self, t: float, points: np.ndarray, detected: np.ndarray) -> None:
         """Feed the fleet's people tracker (:mod:`swarmpark.sense.tracking`) with the points
         the map does not explain and publish the tracks that have moved as people (with
-        their velocities: navigation predicts them)."""
+        their velocities: navigation predicts them). ``detected`` ``(M, 2)``: the fleet's
+        detected obstacle cells (world)."""
         tracks = self.tracker.update(t, points)
+        tree = cKDTree(detected) if len(detected) else None
         for tr in tracks:
+            if tr.id in self._movers or tr.id in self._phantoms:
+                continue
             if np.hypot(*tr.state[2:]) > PERSON_MAX_SPEED_MPS:
                 self._phantoms.add(tr.id)
             elif np.hypot(*(tr.state[:2] - tr.history[0][1:])) >= PERSON_MOVED_M:
-                self._movers.add(tr.id)
+                # Someone who walked off has left the place free; the visible piece of a
+                # crate's edge "moves" along the edge, which is still there.
+                start = np.array(tr.history[0][1:])
+                left = tree is None or not tree.query_ball_point(start, PERSON_LEFT_M)
+                (self._movers if left else self._phantoms).add(tr.id)
         people = [tr for tr in tracks if tr.id in self._movers and tr.id not in self._phantoms]
         live = {tr.id for tr in self.tracker.tracks}
         self._movers &= live
@@ -214,8 +226,6 @@ class OnboardSensing:
     def _blocked_paths(self, new_xy: np.ndarray, has_goal, paths, half_widths) -> np.ndarray:
         """Skids whose planned path (the part still ahead) runs within a skid's half width
         (plus :data:`DETECTION_SQUARE_M`) of newly detected obstacle points."""
-        from scipy.spatial import cKDTree
-
         out = np.zeros(self.n, dtype=bool)
         tree = cKDTree(new_xy)
         for i, path in enumerate(paths):
