@@ -70,3 +70,17 @@ def test_the_onboard_tracker_gives_navigation_the_walking_person_with_velocity()
             k = int(np.argmin(d))
             errors.append(np.linalg.norm(view.people_vel[k] - [1.0, 0.0]))
     assert errors and max(errors) <= 0.2, max(errors)
+
+
+def test_the_browser_frame_carries_the_onboard_trackers_people():
+    """With sensing on, the frame's ``tracked`` layer is the onboard tracker's people (it was
+    never sent before: people were detections only)."""
+    from swarmpark.links.base import TrackedPeople
+    from swarmpark.server.frames import FrameEncoder
+
+    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    sup = Supervisor(world)
+    enc = FrameEncoder(sup)
+    assert "tracked" not in enc.frame({})[0]
+    sup.sensing.people = TrackedPeople(0.0, np.array([[8.0, 5.0]]), np.array([[1.0, 0.0]]), [0.25])
+    assert enc.frame({})[0]["tracked"] == [[8.0, 5.0, 1.0, 0.0]]
