@@ -127,3 +127,15 @@ def test_bad_people_params_name_the_field(field, value):
 def test_aside_clearance_cannot_exceed_the_clearance():
     with pytest.raises(ValueError, match="aside_clearance_m"):
         PeopleParams(clearance_m=0.1, aside_clearance_m=0.2)
+
+
+def test_a_stopped_skid_does_not_step_aside():
+    view = make_view(
+        [[5.0, 3.0, 0.0]],
+        people_xy=[5.0, 5.0],
+        people_vel=[[0.0, -1.2]],
+        people_radius=[RADIUS],
+        stopped=[True],
+    )
+    res = PeopleYield(PeopleParams()).step(view, np.array([0]), np.zeros((1, 2)), _scene(view))
+    assert not res.stepping_aside[0] and np.all(res.commands == 0.0)

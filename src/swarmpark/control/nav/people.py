@@ -182,6 +182,11 @@ class PeopleYield:
         gap_now = ways.gaps(corners)
         slack = self._slack
         in_walk = ((gap_now < -slack) & ways.walking[None]).any(axis=1)
+        # A skid the operator stopped (or not driven) stays where it is.
+        free = view.active[idx[rows]]
+        if view.stopped is not None:
+            free &= ~view.stopped[idx[rows]]
+        in_walk &= free
         for r in rows[in_walk]:
             v = self._step_aside(view, int(idx[r]), ways, scene)
             if v is not None:
