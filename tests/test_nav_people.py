@@ -139,37 +139,3 @@ def test_a_stopped_skid_does_not_step_aside():
     )
     res = PeopleYield(PeopleParams()).step(view, np.array([0]), np.zeros((1, 2)), _scene(view))
     assert not res.stepping_aside[0] and np.all(res.commands == 0.0)
-
-
-def _walk_along_axis(seconds: float = 6.0):
-    """A person walks west at 1.1 m/s along the axis of a skid parked heading east; returns
-    the smallest gap and the skid's last pose."""
-    nav = Navigator(NavParams())
-    pose = np.array([[4.0, 3.0, 0.0]])
-    goal = pose.copy()
-    person, vel = np.array([9.5, 3.0]), np.array([-1.1, 0.0])
-    v = np.zeros((1, 2))
-    dt, gaps = 0.05, []
-    for k in range(int(seconds / dt)):
-        view = make_view(
-            pose,
-            goal,
-            t=k * dt,
-            dt=dt,
-            vel=v,
-            people_xy=person,
-            people_vel=vel,
-            people_radius=[RADIUS],
-        )
-        cmd = nav.compute(view)
-        v = v + np.clip(cmd - v, -1.0 * dt, 1.0 * dt)
-        pose = integrate_unicycle(pose, v[:, 0], v[:, 1], dt)
-        person = person + vel * dt
-        gaps.append(_gap(pose[0], person))
-    return min(gaps), pose[0]
-
-
-def test_a_skid_the_person_walks_at_along_its_axis_turns_across_and_steps_aside():
-    gap, pose = _walk_along_axis()
-    assert gap > 0.0
-    assert abs(pose[1] - 3.0) > 0.3  # it left the line the person walks on

@@ -503,9 +503,6 @@ class PeopleParams:
     #: ... but a skid standing (parked, or waiting) steps aside only when the person would
     #: pass closer than this: stepping aside means docking again.
     aside_clearance_m: float = 0.05
-    #: The place a skid steps aside to is clear of the walk predicted this far ahead (the
-    #: skid would otherwise run ahead of the person along the walk).
-    aside_horizon_s: float = 10.0
     #: People slower than this stand: they may set off any way, so skids keep an extra
     #: ``standing_berth_m`` from them (the tracker's velocity noise is about 0.1 m/s).
     walking_mps: float = 0.3
@@ -530,7 +527,7 @@ class PeopleParams:
         _check(self, {"horizon_s": ">0", "clearance_m": ">=0", "walking_mps": ">0"})
         _check(self, {"standing_berth_m": ">=0", "rollout_s": ">0", "rollout_samples": "int>0"})
         _check(self, {"sample_step_m": ">0", "shift_step_m": ">0", "gain_per_s": ">0"})
-        _check(self, {"overshoot_m": ">=0", "aside_clearance_m": ">=0", "aside_horizon_s": ">0"})
+        _check(self, {"overshoot_m": ">=0", "aside_clearance_m": ">=0"})
         _order(self, "shift_step_m", "shift_max_m")
         if not self.aside_clearance_m <= self.clearance_m:
             raise ValueError(

@@ -14,9 +14,7 @@ wider. Two rules then act on each skid's command, before the collision monitor:
   where it stands, or pass closer than ``aside_clearance_m``) drives along its own axis to the nearest place clear of the way, of static
   solids and of the other skids, keeping the side it chose while it is in the way. The
   collision monitor checks that move against walls and skids but not against the person it
-  leaves room for (its prediction would stop the skid right in the person's way). A skid
-  the person walks at along its own axis (no move along the axis clears the way) first
-  turns in place across the walk.
+  leaves room for (its prediction would stop the skid right in the person's way).
 
 The constant-velocity prediction is the one a Kalman people tracker gives
 (:meth:`swarmpark.sense.tracking.PeopleTracker.predict`); yielding to predicted human motion
@@ -48,9 +46,6 @@ __all__ = ["PeopleYield", "PeopleWays", "YieldResult"]
 
 #: Scales of the commanded speed tried, fastest first (the turn rate is kept); then a stop.
 _SCALES = (1.0, 0.5, 0.25, 0.0)
-#: A skid does not step aside towards a person coming at it (its direction within 60 degrees
-#: of the person's reversed walk): it would meet the person sooner.
-_TOWARDS_COS = 0.5
 #: A rollout may come this much closer to a way than the skid is now (rounding).
 _DEEPER_TOL_M = 1e-3
 
@@ -126,19 +121,17 @@ class PeopleYield:
             return np.zeros(0, dtype=bool)
         return np.linalg.norm(view.people_vel, axis=1) >= self.params.walking_mps
 
-    def ways(self, view: ControlView, horizon_s: float | None = None) -> PeopleWays:
-        """The people's predicted ways (see the module docstring), walks predicted
-        ``horizon_s`` ahead (by default ``params.horizon_s``)."""
+    def ways(self, view: ControlView) -> PeopleWays:
+        """The people's predicted ways (see the module docstring)."""
         p = self.params
-        horizon = p.horizon_s if horizon_s is None else horizon_s
         walking = self.walking(view)
         cs, rs, ws = [], [], []
         for k in range(len(view.people_xy)):
             xy, v, r = view.people_xy[k], view.people_vel[k], float(view.people_radius[k])
             if walking[k]:
-                length = float(np.linalg.norm(v)) * horizon
+                length = float(np.linalg.norm(v)) * p.horizon_s
                 m = int(np.ceil(length / p.sample_step_m)) + 1
-                cs.append(xy + np.linspace(0.0, horizon, m)[:, None] * v)
+                cs.append(xy + np.linspace(0.0, p.horizon_s, m)[:, None] * v)
                 rs.append(np.full(m, r + p.clearance_m))
                 ws.append(np.ones(m, dtype=bool))
             else:
@@ -194,15 +187,10 @@ class PeopleYield:
         if view.stopped is not None:
             free &= ~view.stopped[idx[rows]]
         in_walk &= free
-        # Where to step aside to must be clear of the walk farther ahead: a skid cannot
-        # outrun a person along the walk.
-        far = self.ways(view, self.params.aside_horizon_s) if in_walk.any() else ways
         for r in rows[in_walk]:
-            move = self._step_aside(view, int(idx[r]), far, scene)
-            if move is None:
-                move = self._turn_across(view, int(idx[r]), scene)
-            if move is not None:
-                out[r] = move
+            v = self._step_aside(view, int(idx[r]), ways, scene)
+            if v is not None:
+                out[r] = (v, 0.0)
                 aside[r] = True
         for r in rows[~in_walk]:
             self.side[idx[r]] = 0
@@ -245,10 +233,7 @@ class PeopleYield:
         head = np.array([np.cos(view.poses[i, 2]), np.sin(view.poses[i, 2])])
         best, best_side, best_t = None, 0, np.inf
         sides = [self.side[i]] if self.side[i] else [1, -1]
-        coming = self._nearest_walk(view, i)
         for s in sides:
-            if coming is not None and np.dot(s * head, coming) < -_TOWARDS_COS:
-                continue  # not towards the person coming: turn across first
             shifts = s * self.steps
             poses = np.repeat(view.poses[i][None], len(shifts), axis=0)
             poses[:, :2] += shifts[:, None] * head
@@ -267,35 +252,7 @@ class PeopleYield:
             return None
         self.side[i] = best_side
         v = p.gain_per_s * (best + np.sign(best) * p.overshoot_m)
-        return float(np.clip(v, -view.max_speed[i], view.max_speed[i])), 0.0
-
-    def _turn_across(self, view: ControlView, i: int, scene: Scene):
-        """When no move along its axis clears the way (the person walks along the skid's
-        axis, straight at it), skid ``i`` turns in place towards the nearer heading across the
-        nearest walking person's walk, from where a move along its axis will clear it; None
-        if the turn would sweep into a wall or another skid."""
-        coming = self._nearest_walk(view, i)
-        if coming is None:
-            return None
-        across = np.arctan2(coming[1], coming[0]) + np.pi / 2
-        # Either way along the axis drives out: the nearer of the two headings across.
-        err = (across - view.poses[i, 2] + np.pi / 2) % np.pi - np.pi / 2
-        # The corners sweep the disc of the skid's reach: check its footprint along the turn.
-        turn = view.poses[i, 2] + np.linspace(0.0, err, 8)[1:]
-        poses = np.column_stack([np.repeat(view.poses[i][None, :2], len(turn), 0), turn])
-        corners = footprint_corners(poses, np.repeat(scene.skids.plain[i][None], len(turn), 0))
-        if self._blocked(view, i, corners, scene).any():
-            return None
-        w = np.clip(self.params.gain_per_s * err, -view.max_yaw_rate[i], view.max_yaw_rate[i])
-        return 0.0, float(w)
-
-    def _nearest_walk(self, view: ControlView, i: int) -> np.ndarray | None:
-        """Unit walking direction of the walking person nearest skid ``i`` (None if none)."""
-        walking = np.flatnonzero(self.walking(view))
-        if not len(walking):
-            return None
-        k = walking[np.argmin(np.linalg.norm(view.people_xy[walking] - view.poses[i, :2], axis=1))]
-        return view.people_vel[k] / np.linalg.norm(view.people_vel[k])
+        return float(np.clip(v, -view.max_speed[i], view.max_speed[i]))
 
     @staticmethod
     def _blocked(view: ControlView, i: int, corners: np.ndarray, scene: Scene) -> np.ndarray:
