@@ -155,3 +155,52 @@ def test_bad_inputs_are_refused():
         CostmapConfig(decay_s=0.0)
     with pytest.raises(ValueError, match="costmap.n_robots"):
         LocalCostmap(g, 0, SPEC)
+
+
+def test_a_kidnapped_skids_false_detections_fade_from_the_fleet_layer():
+    """Issue 20 item 4: skid 0 is carried off (it believes it is still where it was), so
+    the walls it sees land where the map has none. The fleet's layer keeps them no longer
+    than ``unconfirmed_s`` even while skid 0 keeps seeing them; what the well-localized skid
+    1 sees stays."""
+    from helpers import asymmetric_room
+
+    from swarmpark.sense.costmap import FleetLayer, FleetLayerConfig
+    from swarmpark.sense.lidar import LidarSpec, scan
+
+    grid = asymmetric_room()
+    spec = LidarSpec(num_beams=360, max_range_m=8.0)
+    truth = np.array([[6.0, 2.5, 2.0], [1.0, 2.5, 0.0]])
+    believed = np.array([[3.5, 1.2, 0.3], truth[1]])  # skid 0's wrong estimate
+    crate = np.array([[[3.0, 2.3], [3.4, 2.3], [3.4, 2.7], [3.0, 2.7]]])  # seen by skid 1
+    cm = LocalCostmap(grid, 2, spec)
+    fleet = FleetLayer(cm, FleetLayerConfig(unconfirmed_s=1.0))
+    rng = np.random.default_rng(0)
+    crate_cell = grid.world_to_cell(np.array([[3.0, 2.5]]))[0]
+    for k in range(31):  # 3 s of scans at 10 Hz
+        t = 0.1 * k
+        cm.update(t, believed, scan(spec, truth, grid, polygons=crate, rng=rng))
+        cells = fleet.merge(t)
+        if k == 0:
+            first = len(cells)
+    assert cm.explained_share[0] < 0.5 < 0.9 < cm.explained_share[1]
+    own = cm.obstacles(0, t).cells
+    assert len(own) > 50  # skid 0 still sees its false walls ...
+    merged = {tuple(c) for c in cells}
+    assert not merged & {tuple(c) for c in own if tuple(c) not in _cells_of(cm, 1, t)}
+    assert first >= len(own)  # ... which the fleet had at first, and has dropped since
+    # The crate skid 1 sees is in the fleet's layer all along.
+    near = np.abs(cells - crate_cell).max(axis=1) <= 1
+    assert near.any()
+
+
+def _cells_of(cm, robot, t):
+    return {tuple(c) for c in cm.obstacles(robot, t).cells}
+
+
+def test_fleet_layer_config_names_the_bad_field():
+    from swarmpark.sense.costmap import FleetLayerConfig
+
+    with pytest.raises(ValueError, match="unconfirmed_s"):
+        FleetLayerConfig(unconfirmed_s=0.0)
+    with pytest.raises(ValueError, match="trust_share"):
+        FleetLayerConfig(trust_share=1.5)

@@ -48,3 +48,39 @@ def test_skids_park_past_a_detected_crate_and_a_person_who_walks_away():
     for i in range(sup.sim.n):
         near = sup.costmap.obstacles(i, t, center=PERSON_START, radius_m=0.5)
         assert len(near.cells) == 0
+
+
+@pytest.mark.slow
+def test_the_onboard_tracker_gives_navigation_the_walking_person_with_velocity():
+    """Issue 20 item 3: with sensing on, the person is tracked from the scans (not read from
+    the scenario) and navigation gets the track with its velocity; the crate and the person
+    standing are detections only (tracks that never moved are not people)."""
+    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    sup = Supervisor(world)
+    errors = []
+    while sup.t < 17.0:
+        sup.tick()
+        view = sup.view()
+        if sup.t < 12.0:  # the person stands until 12 s
+            assert len(view.people_xy) == 0
+        elif sup.t >= 15.0:  # walking east at 1 m/s since 14.1 s (the second leg)
+            truth = sup.sim.person_positions()[0]
+            d = np.linalg.norm(view.people_xy - truth, axis=1)
+            assert d.min() < 0.4, (sup.t, view.people_xy, truth)
+            k = int(np.argmin(d))
+            errors.append(np.linalg.norm(view.people_vel[k] - [1.0, 0.0]))
+    assert errors and max(errors) <= 0.2, max(errors)
+
+
+def test_the_browser_frame_carries_the_onboard_trackers_people():
+    """With sensing on, the frame's ``tracked`` layer is the onboard tracker's people (it was
+    never sent before: people were detections only)."""
+    from swarmpark.links.base import TrackedPeople
+    from swarmpark.server.frames import FrameEncoder
+
+    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    sup = Supervisor(world)
+    enc = FrameEncoder(sup)
+    assert "tracked" not in enc.frame({})[0]
+    sup.sensing.people = TrackedPeople(0.0, np.array([[8.0, 5.0]]), np.array([[1.0, 0.0]]), [0.25])
+    assert enc.frame({})[0]["tracked"] == [[8.0, 5.0, 1.0, 0.0]]

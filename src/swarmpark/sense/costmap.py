@@ -7,6 +7,11 @@ a tolerance from the map's occupied cells marks its cell, a marked cell is clear
 beam of the same skid passes through it (the space is seen empty) or when it has not been seen
 for ``decay_s`` (a person who walked out of view). Storage is sparse (only marked cells), so
 memory does not grow with fleet size times map size.
+
+The fleet's layer (:class:`FleetLayer`) merges the skids' layers so that one skid with a wrong
+pose estimate (kidnapped, not yet found again) cannot blind the fleet: its scans then do not
+fit the map, and what it alone sees is kept only for ``unconfirmed_s`` from when it first
+appeared, unless another skid sees it too or the skid fits the map again.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.sense.lidar import LidarSpec, scan_points, sensor_poses
 
-__all__ = ["CostmapConfig", "LocalCostmap", "Obstacles"]
+__all__ = ["CostmapConfig", "FleetLayer", "FleetLayerConfig", "LocalCostmap", "Obstacles"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -115,6 +120,8 @@ class LocalCostmap:
         self._keys = np.zeros(0, dtype=np.int64)
         self._seen = np.zeros(0)
         self._time = -np.inf
+        #: ``(N,)`` share of each skid's last scan returns the map explains (1 before any).
+        self.explained_share = np.ones(self.n_robots)
 
     @property
     def clear_margin_m(self) -> float:
@@ -136,14 +143,7 @@ class LocalCostmap:
         h, w = self.grid.shape
         if self.config.clear_on_pass and len(self._keys):
             self._clear_passed(poses, ranges)
-        pts = scan_points(self.spec, poses, ranges)  # (N, B, 2)
-        returned = np.isfinite(ranges) & (ranges < self.spec.max_range_m)
-        robot = np.broadcast_to(np.arange(self.n_robots)[:, None], ranges.shape)[returned]
-        rc = self.grid.world_to_cell(pts[returned])
-        inside = self.grid.in_bounds(rc)
-        robot, rc = robot[inside], rc[inside]
-        unexplained = self._dist[rc[:, 0], rc[:, 1]] > self.config.map_tolerance_m
-        robot, rc = robot[unexplained], rc[unexplained]
+        robot, rc, _ = self._unexplained(poses, ranges)
         new = np.unique(robot.astype(np.int64) * self._cells + rc[:, 0] * w + rc[:, 1])
         # Old entries not re-observed keep their time; re-observed and new ones get t.
         old = ~np.isin(self._keys, new, assume_unique=True)
@@ -153,6 +153,32 @@ class LocalCostmap:
         seen = np.concatenate([self._seen[keep], np.full(len(new), float(t))])
         order = np.argsort(keys, kind="stable")
         self._keys, self._seen = keys[order], seen[order]
+
+    def _unexplained(self, poses: np.ndarray, ranges: np.ndarray):
+        """The scan end points the map does not explain: per point its skid ``(M,)``, cell
+        ``(M, 2)`` and world position ``(M, 2)``."""
+        pts = scan_points(self.spec, poses, ranges)  # (N, B, 2)
+        returned = np.isfinite(ranges) & (ranges < self.spec.max_range_m)
+        robot = np.broadcast_to(np.arange(self.n_robots)[:, None], ranges.shape)[returned]
+        xy = pts[returned]
+        rc = self.grid.world_to_cell(xy)
+        inside = self.grid.in_bounds(rc)
+        robot, rc, xy = robot[inside], rc[inside], xy[inside]
+        unexplained = self._dist[rc[:, 0], rc[:, 1]] > self.config.map_tolerance_m
+        # How well each skid's scan fits the map (for the fleet's layer): the share of its
+        # returns the map explains; a skid with no return keeps its last value.
+        total = np.bincount(robot, minlength=self.n_robots)
+        bad = np.bincount(robot[unexplained], minlength=self.n_robots)
+        seen = total > 0
+        self.explained_share[seen] = 1.0 - bad[seen] / total[seen]
+        return robot[unexplained], rc[unexplained], xy[unexplained]
+
+    def unexplained_points(self, poses: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+        """World end points ``(M, 2)`` of the scans ``ranges`` ``(N, B)`` taken at ``poses``
+        that the map does not explain (what a people tracker clusters)."""
+        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+        ranges = np.asarray(ranges, dtype=float).reshape(self.n_robots, self.spec.num_beams)
+        return self._unexplained(poses, ranges)[2]
 
     def _clear_passed(self, poses: np.ndarray, ranges: np.ndarray) -> None:
         """Forget marked cells that a beam of the same skid has just passed through."""
@@ -219,3 +245,72 @@ class LocalCostmap:
         out.occupied |= self.obstacle_mask(robot, t)
         out.unknown &= ~out.occupied
         return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class FleetLayerConfig:
+    """How the skids' layers merge into the fleet's (:class:`FleetLayer`).
+
+    Parameters
+    ----------
+    unconfirmed_s
+        A cell only one skid sees, while that skid's scans do not fit the map, is kept this
+        long from when it first appeared (the obstacle layer's own ``decay_s``).
+    trust_share
+        A skid whose last scan the map explains at least this share of is trusted alone (a
+        kidnapped skid's scan fits the map it believes it is in only where walls happen to
+        line up: a few tenths at most; a well-localized skid's, except for what really is
+        new, nearly all).
+    """
+
+    unconfirmed_s: float = 2.0
+    trust_share: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.unconfirmed_s) and self.unconfirmed_s > 0):
+            raise ValueError(
+                f"fleet_layer.unconfirmed_s must be a finite number > 0 (got {self.unconfirmed_s!r})"
+            )
+        if not 0 <= self.trust_share <= 1:
+            raise ValueError(
+                f"fleet_layer.trust_share must be in [0, 1] (got {self.trust_share!r})"
+            )
+
+
+class FleetLayer:
+    """The fleet's obstacle layer: the skids' layers of a :class:`LocalCostmap` merged.
+
+    A cell is in the fleet's layer if two skids see it, or one skid whose scan fits the map
+    (:attr:`LocalCostmap.explained_share` at least ``trust_share``), or, seen by one skid only
+    whose scan does not fit the map, for ``unconfirmed_s`` after it first appeared: a kidnapped
+    skid's false detections fade out of the fleet's layer even while that skid keeps seeing
+    them, so they cannot block the other skids' paths.
+    """
+
+    def __init__(self, costmap: LocalCostmap, config: FleetLayerConfig | None = None) -> None:
+        self.costmap = costmap
+        self.config = config if config is not None else FleetLayerConfig()
+        self._first_lin = np.zeros(0, dtype=np.int64)  # sorted cells, when first in a layer
+        self._first_t = np.zeros(0)
+
+    def merge(self, t: float) -> np.ndarray:
+        """The fleet's obstacle cells ``(M, 2)`` (row, col; sorted) at time ``t``."""
+        cm, cfg = self.costmap, self.config
+        w = cm.grid.shape[1]
+        lins, robots = [], []
+        for i in range(cm.n_robots):
+            cells = cm.obstacles(i, t).cells
+            lins.append(cells[:, 0].astype(np.int64) * w + cells[:, 1])
+            robots.append(np.full(len(cells), i))
+        lin, robot = np.concatenate(lins), np.concatenate(robots)
+        cells, inv, count = np.unique(lin, return_inverse=True, return_counts=True)
+        trusted = cm.explained_share[robot] >= cfg.trust_share
+        confirmed = (count >= 2) | (np.bincount(inv, weights=trusted, minlength=len(cells)) > 0)
+        # When each cell first appeared (kept while some skid still has it).
+        known = np.isin(cells, self._first_lin, assume_unique=True)
+        first = np.full(len(cells), float(t))
+        first[known] = self._first_t[np.searchsorted(self._first_lin, cells[known])]
+        self._first_lin, self._first_t = cells, first
+        keep = confirmed | (t - first <= cfg.unconfirmed_s)
+        cells = cells[keep]
+        return np.column_stack([cells // w, cells % w])

@@ -279,9 +279,10 @@ class FrameEncoder:
 
     def _tracked(self) -> list | None:
         """The people the fleet avoids as its tracker reports them, ``[[x, y, vx, vy], ...]``
-        (``None`` with onboard sensing: the skids then see people only as detections)."""
-        people = self.sup.inbox.people
-        if self.sup.sensing is not None or people is None or not len(people.xy):
+        (with onboard sensing, the onboard tracker's people that walked)."""
+        sensing = self.sup.sensing
+        people = self.sup.inbox.people if sensing is None else sensing.people
+        if people is None or not len(people.xy):
             return None
         rows = np.column_stack([np.round(people.xy, LINE_DEC), np.round(people.vel, V_DEC)])
         return rows.tolist()

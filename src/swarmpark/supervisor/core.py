@@ -266,9 +266,10 @@ class Supervisor(CommandsMixin):
         info = self.info
         if self.sensing is not None:
             # Onboard sensing: avoid the walls and what the scans detected (people included,
-            # as still obstacles refreshed every scan), not the scenario's obstacles and people.
-            ppos, prad = np.zeros((0, 2)), np.zeros(0)
-            pvel = np.zeros_like(ppos)
+            # as still obstacles refreshed every scan), not the scenario's obstacles and people;
+            # people the onboard tracker saw walk also with their velocities.
+            people = self.sensing.people
+            ppos, pvel, prad = people.xy, people.vel, people.radius_m
             static_pieces = self.sensing.static_view
         else:
             people = self.inbox.people  # as the link's people tracker reports them

@@ -12,9 +12,10 @@ Nothing here sees the simulator's truth: only :class:`~swarmpark.links.base.Inbo
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from swarmpark.core.geometry import pad_polygons, triangulate
-from swarmpark.links.base import FleetInfo, Inbox
+from swarmpark.links.base import FleetInfo, Inbox, TrackedPeople
 from swarmpark.world.scenario import World
 
 __all__ = [
@@ -23,6 +24,10 @@ __all__ = [
     "ESTIMATE_JUMP_M",
     "DETECTION_PLAN_PERIOD_S",
     "DETECTION_SQUARE_M",
+    "PERSON_RADIUS_M",
+    "PERSON_MOVED_M",
+    "PERSON_MAX_SPEED_MPS",
+    "PERSON_LEFT_M",
 ]
 
 #: Beams of each scan scored by the particle filter (a subsample, as AMCL's max_beams).
@@ -35,6 +40,16 @@ DETECTION_PLAN_PERIOD_S = 1.0
 #: Detected obstacle cells go to the reactive layer (potential field, collision monitor, ORCA)
 #: as static solids: one square of this size for each square holding detected cells.
 DETECTION_SQUARE_M = 0.1
+#: Tracked people are given to navigation with this radius (the tracker sees centroids).
+PERSON_RADIUS_M = 0.25
+#: A track is a person once it has moved this far from where it was first seen: crates and
+#: parts of the map the scans see differently never move, so they stay detections only.
+PERSON_MOVED_M = 0.5
+#: ... and never faster than this (people walk at up to about 2 m/s): the centroid of the
+#: visible part of a crate's edge slides along it as a skid drives by, at 2-3 m/s.
+PERSON_MAX_SPEED_MPS = 2.0
+#: ... and where it was first seen is free of detections by then (within this distance).
+PERSON_LEFT_M = 0.2
 
 
 class OnboardSensing:
@@ -56,7 +71,7 @@ class OnboardSensing:
 
     def __init__(self, world: World, info: FleetInfo, inbox: Inbox, base_grid) -> None:
         from swarmpark.sense.amcl import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
-        from swarmpark.sense.costmap import LocalCostmap
+        from swarmpark.sense.costmap import FleetLayer, LocalCostmap
         from swarmpark.sense.lidar import LidarSpec
 
         cfg = world.scenario.sensing
@@ -84,6 +99,7 @@ class OnboardSensing:
         self.estimates = self.localizer.estimates.copy()
         self._base_grid = base_grid
         self.costmap = LocalCostmap(base_grid, self.n, self.lidar_spec)
+        self.fleet_layer = FleetLayer(self.costmap)
         self.known_grid = base_grid.copy()
         self._detected_mask = np.zeros(base_grid.shape, dtype=bool)
         self._plan_grid_t = -np.inf
@@ -91,6 +107,14 @@ class OnboardSensing:
         self._wall_pieces = pieces[np.array([o == "wall" for o in owners])]
         self._detected_squares = np.zeros((0, 2), dtype=np.int64)
         self.static_view = self._wall_pieces  # walls and detected squares, for the view
+        from swarmpark.sense.tracking import PeopleTracker
+
+        self.tracker = PeopleTracker()
+        self._movers: set[int] = set()
+        self._phantoms: set[int] = set()  # tracks too fast for a person, ever
+        z = np.zeros((0, 2))
+        #: The people the tracker follows (tracks that moved), as the link's message.
+        self.people = TrackedPeople(0.0, z, z.copy(), np.zeros(0))
 
     @property
     def detected_squares(self) -> np.ndarray:
@@ -127,13 +151,16 @@ class OnboardSensing:
         """Feed the scans (less the returns from other skids, whose places the fleet knows) to
         the costmap at the estimated poses; refresh the solids the reactive layer avoids and,
         at :data:`DETECTION_PLAN_PERIOD_S`, the planner's map. Detections are shared by the
-        fleet (the union of every skid's costmap): the central controller plans for all."""
+        fleet (every skid's costmap merged, :class:`~swarmpark.sense.costmap.FleetLayer`: what
+        only a skid whose scans do not fit the map sees fades out): the central controller
+        plans for all."""
         others = self.localizer.other_skid_beams(ranges)
         seen = ranges if others is None else np.where(others, np.nan, ranges)
         self.costmap.update(t, self.estimates, seen)
-        cells = np.concatenate([self.costmap.obstacles(i, t).cells for i in range(self.n)])
+        cells = self.fleet_layer.merge(t)
         grid = self._base_grid
         pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
+        self._track_people(t, self.costmap.unexplained_points(self.estimates, seen), pts)
         squares = np.unique(np.floor(pts / DETECTION_SQUARE_M).astype(np.int64), axis=0)
         if not np.array_equal(squares, self._detected_squares):
             # Each square grown by half a cell covers the cells whose centres lie in it.
@@ -170,11 +197,35 @@ class OnboardSensing:
                     )
         return replan
 
+    def _track_people(self, t: float, points: np.ndarray, detected: np.ndarray) -> None:
+        """Feed the fleet's people tracker (:mod:`swarmpark.sense.tracking`) with the points
+        the map does not explain and publish the tracks that have moved as people (with
+        their velocities: navigation predicts them). ``detected`` ``(M, 2)``: the fleet's
+        detected obstacle cells (world)."""
+        tracks = self.tracker.update(t, points)
+        tree = cKDTree(detected) if len(detected) else None
+        for tr in tracks:
+            if tr.id in self._movers or tr.id in self._phantoms:
+                continue
+            if np.hypot(*tr.state[2:]) > PERSON_MAX_SPEED_MPS:
+                self._phantoms.add(tr.id)
+            elif np.hypot(*(tr.state[:2] - tr.history[0][1:])) >= PERSON_MOVED_M:
+                # Someone who walked off has left the place free; the visible piece of a
+                # crate's edge "moves" along the edge, which is still there.
+                start = np.array(tr.history[0][1:])
+                left = tree is None or not tree.query_ball_point(start, PERSON_LEFT_M)
+                (self._movers if left else self._phantoms).add(tr.id)
+        people = [tr for tr in tracks if tr.id in self._movers and tr.id not in self._phantoms]
+        live = {tr.id for tr in self.tracker.tracks}
+        self._movers &= live
+        self._phantoms &= live
+        xy = np.array([tr.state[:2] for tr in people]).reshape(-1, 2)
+        vel = np.array([tr.state[2:] for tr in people]).reshape(-1, 2)
+        self.people = TrackedPeople(t, xy, vel, np.full(len(people), PERSON_RADIUS_M))
+
     def _blocked_paths(self, new_xy: np.ndarray, has_goal, paths, half_widths) -> np.ndarray:
         """Skids whose planned path (the part still ahead) runs within a skid's half width
         (plus :data:`DETECTION_SQUARE_M`) of newly detected obstacle points."""
-        from scipy.spatial import cKDTree
-
         out = np.zeros(self.n, dtype=bool)
         tree = cKDTree(new_xy)
         for i, path in enumerate(paths):

@@ -32,6 +32,7 @@ from swarmpark.control.nav.make_room import MakeRoom, RoomState
 from swarmpark.control.nav.manoeuvre import ManoeuvrePlanner, ManoeuvreState
 from swarmpark.control.nav.monitor import CollisionMonitor, MonitorResult
 from swarmpark.control.nav.params import NavParams
+from swarmpark.control.nav.people import PeopleYield
 from swarmpark.control.nav.planner import Planner
 from swarmpark.control.nav.recovery import (
     BackUp,
@@ -93,6 +94,7 @@ class Navigator:
         self.traffic = TrafficControl(p.traffic)
         self.give_way = GiveWay(p.give_way)
         self.make_room = MakeRoom(p.make_room)
+        self.people = PeopleYield(p.people)
         self.ladder = DeadlockLadder(p.deadlock, p.backup, stall_s=stall_s)
         self.avoidance = OrcaAdapter(
             p.rvo,
@@ -149,7 +151,7 @@ class Navigator:
         waiting = self.follower.waiting(view, idx, paths)
         reverse = self.follower.update_ends(view, idx, final, paths)
         raw, dist_goal = self.field.drive(
-            view, idx, scene, targets, reverse, final, p.follower.approach_m
+            self.people.field_view(view), idx, scene, targets, reverse, final, p.follower.approach_m
         )
         raw[waiting] = 0.0
         # A skid stuck for a while drives a planned manoeuvre instead (not docked, not held
@@ -181,16 +183,22 @@ class Navigator:
             aims, _ = self.follower.targets(view, idx[cruising], paths, p.rvo.lookahead_m)
             full = self._avoid(view, full, idx[cruising], aims)
             moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
+            full[moving], aside = self._yield(view, moving, full[moving])
             cmd[moving] = self._monitor(view, moving, full[moving], joint=True)
+            self._guard_aside(view, moving[aside], full, cmd)
         else:
             docked_all = [r.dock.docked for r in self.robots]  # per robot, not per row
             raw = self.give_way.step(
                 view, idx, raw, dist_goal, self._states("give_way"), docked_all
             )
             raw[man] = mraw
+            raw, aside = self._yield(view, idx, raw)
             # Pairs whose commands together close in: the one without the right of way
             # stops (each skid's own check sees the others where they stand).
             cmd[idx] = self._monitor(view, idx, raw, joint="yield")
+            full = np.zeros((n, 2))
+            full[idx] = raw
+            self._guard_aside(view, idx[aside], full, cmd)
         self.manoeuvre.observe(view, idx, man_states, raw, cmd[idx])
         hold_outside(view, idx, cmd, p.hold)
         self.queued = np.zeros(n, dtype=bool)
@@ -225,6 +233,20 @@ class Navigator:
         if self.making_room is not None and i < len(self.making_room) and self.making_room[i]:
             return "making room for another skid", []
         return "moving without progress (a local minimum of the potential field)", []
+
+    def _yield(self, view: ControlView, idx: np.ndarray, raw: np.ndarray):
+        """People's right of way (:mod:`.people`): the commands of skids ``idx`` and which
+        of them step out of a person's way (they dock again afterwards)."""
+        res = self.people.step(view, idx, raw, self.scene)
+        for i in idx[res.stepping_aside]:
+            self.robots[i].dock.docked = False
+        return res.commands, res.stepping_aside
+
+    def _guard_aside(self, view: ControlView, rows: np.ndarray, full, cmd) -> None:
+        """Skids stepping out of a person's way are checked against walls and skids only."""
+        if len(rows):
+            free = self.people.without_people(view)
+            cmd[rows] = self.monitor.check(free, rows, full[rows], self.scene).commands
 
     def _fleet(self, view: ControlView) -> FleetState:
         """The fleet as the planner sees it (:class:`~.fleetmap.FleetState`)."""

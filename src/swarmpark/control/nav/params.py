@@ -30,6 +30,7 @@ __all__ = [
     "ManoeuvreParams",
     "MonitorParams",
     "NavParams",
+    "PeopleParams",
     "PlannerParams",
     "StallParams",
     "TrafficParams",
@@ -494,6 +495,54 @@ class HoldParams:
 
 
 @dataclass(frozen=True, kw_only=True)
+class PeopleParams:
+    """Right of way for people (:mod:`.people`): skids keep out of a person's predicted walk."""
+
+    #: Off: people are left to the field and the monitor alone (the behaviour before).
+    enabled: bool = True
+    #: A person's walk is predicted this far ahead at constant velocity (a skid needs about
+    #: 2 s to back its own length out of the way; 3 s leaves room for the tracker's lag).
+    horizon_s: float = 3.0
+    #: Skids on the move keep this far from the predicted walk (the tracker's error plus a
+    #: margin) ...
+    clearance_m: float = 0.3
+    #: ... but a skid standing (parked, or waiting) steps aside only when the person would
+    #: pass closer than this: stepping aside means docking again.
+    aside_clearance_m: float = 0.05
+    #: People slower than this stand: they may set off any way, so skids keep an extra
+    #: ``standing_berth_m`` from them (the tracker's velocity noise is about 0.1 m/s).
+    walking_mps: float = 0.3
+    standing_berth_m: float = 0.5
+    #: A skid's command is simulated this far ahead and slowed or stopped before it takes
+    #: the skid deeper into a person's way.
+    rollout_s: float = 1.0
+    rollout_samples: int = 5
+    #: Predicted walks are sampled at this spacing (a fraction of a person's radius).
+    sample_step_m: float = 0.1
+    #: A skid standing in a walk moves along its axis to the nearest free place: steps of
+    #: ``shift_step_m`` up to ``shift_max_m`` either way, at ``gain_per_s`` per metre to go,
+    #: aiming ``overshoot_m`` past the first free shift.
+    shift_step_m: float = 0.1
+    shift_max_m: float = 3.0
+    gain_per_s: float = 2.0
+    overshoot_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"PeopleParams.enabled must be true or false (got {self.enabled!r})")
+        _check(self, {"horizon_s": ">0", "clearance_m": ">=0", "walking_mps": ">0"})
+        _check(self, {"standing_berth_m": ">=0", "rollout_s": ">0", "rollout_samples": "int>0"})
+        _check(self, {"sample_step_m": ">0", "shift_step_m": ">0", "gain_per_s": ">0"})
+        _check(self, {"overshoot_m": ">=0", "aside_clearance_m": ">=0"})
+        _order(self, "shift_step_m", "shift_max_m")
+        if not self.aside_clearance_m <= self.clearance_m:
+            raise ValueError(
+                "PeopleParams.aside_clearance_m must be at most clearance_m "
+                f"(got {self.aside_clearance_m!r} > {self.clearance_m!r})"
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
 class NavParams:
     """Tuning of the whole navigation stack: the avoidance mode and one object per component."""
 
@@ -514,6 +563,7 @@ class NavParams:
     make_room: MakeRoomParams = field(default_factory=MakeRoomParams)
     rvo: AvoidanceParams = field(default_factory=AvoidanceParams)
     hold: HoldParams = field(default_factory=HoldParams)
+    people: PeopleParams = field(default_factory=PeopleParams)
 
     def __post_init__(self) -> None:
         if self.avoidance not in AVOIDANCE_MODES:
