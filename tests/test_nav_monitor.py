@@ -102,25 +102,3 @@ def test_rollout_respects_the_acceleration_limit():
 def test_monitor_params_name_the_bad_field(kw, name):
     with pytest.raises(ValueError, match=f"MonitorParams.{name}"):
         MonitorParams(**kw)
-
-
-def test_converging_skids_each_free_alone_yield_by_priority():
-    """Two skids closing at a shallow angle: each one's own check (the other where it stands)
-    lets both go on, and together they would touch. joint="yield" stops only the one without
-    the right of way and names the other as its blocker; equal priorities go by fleet order."""
-    a = np.deg2rad(-18.0)
-    poses = [[3.3, 3.95, a], [3.0, 2.9, 0.0]]
-    raw = np.array([[0.5, 0.0], [0.5, 0.0]])
-    vel = np.array([[0.2, 0.0], [0.2, 0.0]])  # speeding up: the yielder can still stop short
-    view = make_view(poses, vel=vel, priority=[0.0, 1.0])
-    alone = _check(view, raw)
-    assert np.array_equal(alone.commands, raw)  # each is free alone
-    # Rolled out together they touch within the horizon: the lower priority (row 0) yields.
-    res = _check(view, raw, joint="yield")
-    assert res.commands[0, 0] == 0.0 and res.commands[1, 0] == 0.5
-    assert 1 in res.blockers[0] and res.blockers[1] == set()
-    # A tie goes to the earlier skid of the fleet; plain joint=True stops both.
-    tie = make_view(poses, vel=vel)
-    res = _check(tie, raw, joint="yield")
-    assert res.commands[0, 0] == 0.5 and res.commands[1, 0] == 0.0
-    assert np.all(_check(tie, raw, joint=True).commands == 0.0)

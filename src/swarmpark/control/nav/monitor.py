@@ -100,12 +100,11 @@ class CollisionMonitor:
         scene: Scene,
         *,
         robots: bool = True,
-        joint: bool | str = False,
+        joint: bool = False,
     ) -> MonitorResult:
         """Safe commands for robots ``idx`` commanded ``raw`` (others where they are now);
         with ``joint``, also stop pairs whose commands together would bring them into
-        contact (:meth:`joint_check`; ``joint="yield"``: only the one without the right of
-        way, see there). ``robots=False`` ignores the other skids."""
+        contact (:meth:`joint_check`). ``robots=False`` ignores the other skids."""
         scales, times = self.scales, self.times
         n_act, S, T = len(idx), len(self.scales), len(self.times)
         body = scene.skids.grown[idx]
@@ -134,8 +133,7 @@ class CollisionMonitor:
         slowed = first_safe > 0
         blockers = [b if s else set() for b, s in zip(blockers, slowed, strict=True)]
         if joint and robots:
-            for k, j in self.joint_check(view, idx, out, body, yield_=joint == "yield"):
-                blockers[k] = blockers[k] | {int(idx[j])}
+            self.joint_check(view, idx, out, body)
         return MonitorResult(out, blockers, slowed)
 
     @staticmethod
@@ -240,31 +238,18 @@ class CollisionMonitor:
         return out
 
     def joint_check(
-        self,
-        view: ControlView,
-        idx: np.ndarray,
-        out: np.ndarray,
-        body: np.ndarray,
-        *,
-        yield_: bool = False,
-    ) -> list[tuple[int, int]]:
+        self, view: ControlView, idx: np.ndarray, out: np.ndarray, body: np.ndarray
+    ) -> None:
         """Stop the pairs of skids whose commands, held together, bring them into contact
-        within the horizon (in place on ``out``); returns the ``(stopped row, other row)``
-        pairs where one skid yielded to the other.
+        within the horizon (in place on ``out``).
 
         Each skid's own check treats the others as standing still; two skids turning in
-        place next to each other, each safe alone, can still swing their corners together,
-        and two converging at a shallow angle each see a free way ahead of the other's
-        current pose. ORCA should prevent that, but its guarantee is for one step and
-        holonomic centres. Without ``yield_`` both skids of a pair stop; with it only the
-        one without the right of way (lower priority; on a tie, the later in the fleet,
-        which is ordered by id) stops, and the other too only if its braking partner is
-        still in its way. The stopped skids' braking is rolled out again, until no new pair
-        is found.
+        place next to each other, each safe alone, can still swing their corners together.
+        ORCA should prevent that, but its guarantee is for one step and holonomic centres.
+        The stopped skids' braking is rolled out again, until no new pair is found.
         """
         times = self.times
         T = len(times)
-        yields: list[tuple[int, int]] = []
         reach = max(f.circumradius_m for f in view.footprints) * 2.0
         # Two skids closing at their current speed plus their top speed over the horizon.
         speed = np.abs(view.vel[idx, 0]).max(initial=0.0) + view.max_speed[idx].max()
@@ -279,25 +264,8 @@ class CollisionMonitor:
             b = np.repeat(pairs[:, 1], T)
             tk = np.tile(np.arange(T), len(pairs))
             hit = convex_overlap(corners[a, tk], corners[b, tk]) > TOUCH_TOLERANCE_M
-            hp = pairs[hit.reshape(len(pairs), T).any(axis=1)]
-            if yield_ and len(hp):
-                # The lower of (priority, -row) yields; if it already stands, the other stops.
-                prio = view.priority[idx]
-                first_wins = (prio[hp[:, 0]] > prio[hp[:, 1]]) | (
-                    (prio[hp[:, 0]] == prio[hp[:, 1]]) & (hp[:, 0] < hp[:, 1])
-                )
-                lo = np.where(first_wins, hp[:, 1], hp[:, 0])
-                hi = np.where(first_wins, hp[:, 0], hp[:, 1])
-                lo_moving = np.any(out[lo] != 0.0, axis=1)
-                stop = np.where(lo_moving, lo, hi)
-                other = np.where(lo_moving, hi, lo)
-                keep = np.any(out[stop] != 0.0, axis=1)
-                yields.extend(zip(stop[keep].tolist(), other[keep].tolist(), strict=True))
-                bad = np.unique(stop[keep])
-            else:
-                bad = np.unique(hp)
-                bad = bad[np.any(out[bad] != 0.0, axis=1)]
+            bad = np.unique(pairs[hit.reshape(len(pairs), T).any(axis=1)])
+            bad = bad[np.any(out[bad] != 0.0, axis=1)]
             if not len(bad):
-                return yields
+                return
             out[bad] = 0.0
-        return yields

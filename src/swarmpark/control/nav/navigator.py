@@ -193,9 +193,7 @@ class Navigator:
             )
             raw[man] = mraw
             raw, aside = self._yield(view, idx, raw)
-            # Pairs whose commands together close in: the one without the right of way
-            # stops (each skid's own check sees the others where they stand).
-            cmd[idx] = self._monitor(view, idx, raw, joint="yield")
+            cmd[idx] = self._monitor(view, idx, raw)
             full = np.zeros((n, 2))
             full[idx] = raw
             self._guard_aside(view, idx[aside], full, cmd)
