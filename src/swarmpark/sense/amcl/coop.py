@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from swarmpark.core.geometry import wrap_angle
 
@@ -166,6 +167,19 @@ def pose_variance(cov: np.ndarray, half_length: np.ndarray) -> np.ndarray:
     return np.maximum(xy, 0.0) + np.maximum(cov[:, 2, 2], 0.0) * half_length**2
 
 
+def _candidate_distance(wx, wy, pose, center_offset, half, cand) -> np.ndarray:
+    """Distance ``(P, k)`` from points ``(P,)`` to the outlines of their candidate rectangles
+    ``cand`` ``(P, k)`` (indices into ``pose``, ``center_offset``, ``half``)."""
+    p = pose[cand]
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    dx = wx[:, None] - (p[..., 0] + c * center_offset[cand])
+    dy = wy[:, None] - (p[..., 1] + s * center_offset[cand])
+    q = np.abs(c * dx + s * dy) - half[cand, 0]
+    r = np.abs(-s * dx + c * dy) - half[cand, 1]
+    outside = np.hypot(np.maximum(q, 0.0), np.maximum(r, 0.0))
+    return np.where((q > 0) | (r > 0), outside, -np.maximum(q, r))
+
+
 def neighbour_beams(
     i: int,
     ranges: np.ndarray,
@@ -204,13 +218,27 @@ def neighbour_beams(
     b, wx, wy = b[unexplained], wx[unexplained], wy[unexplained]
     if not len(b):
         return None
-    d = rectangle_distance(
-        wx[:, None], wy[:, None], poses[others], center_offsets[others], halves[others]
-    )
+    # Candidates: the two neighbours whose rectangle centres are nearest each end point
+    # (rectangles do not overlap), then the distance to those outlines only.
     gate = cfg.gate_m + 2.0 * np.sqrt(variances[others])
-    d = np.where(d <= gate, d, np.inf)
-    near = np.argmin(d, axis=1)
-    hit = np.isfinite(d[np.arange(len(b)), near])
+    op = poses[others]
+    centres = op[:, :2] + center_offsets[others, None] * np.column_stack(
+        [np.cos(op[:, 2]), np.sin(op[:, 2])]
+    )
+    reach = float(np.max(np.hypot(halves[others, 0], halves[others, 1]) + gate))
+    n_cand = min(2, len(others))
+    _, cand = cKDTree(centres).query(
+        np.column_stack([wx, wy]), k=n_cand, distance_upper_bound=reach
+    )
+    cand = cand.reshape(len(b), n_cand)
+    valid = cand < len(others)
+    cj = np.where(valid, cand, 0)
+    d = _candidate_distance(wx, wy, op, center_offsets[others], halves[others], cj)
+    d = np.where(valid & (d <= gate[cj]), d, np.inf)
+    pick = np.argmin(d, axis=1)
+    rows = np.arange(len(b))
+    hit = np.isfinite(d[rows, pick])
+    near = cj[rows, pick]
     beams, owner = [], []
     for k, j in enumerate(others):
         mine = b[hit & (near == k)]
