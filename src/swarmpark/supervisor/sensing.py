@@ -71,6 +71,7 @@ class OnboardSensing:
 
     def __init__(self, world: World, info: FleetInfo, inbox: Inbox, base_grid) -> None:
         from swarmpark.sense.amcl import RECOVERY, FilterConfig, FleetLocalizer, LikelihoodField
+        from swarmpark.sense.amcl.coop import CoopConfig
         from swarmpark.sense.costmap import FleetLayer, LocalCostmap
         from swarmpark.sense.lidar import LidarSpec
 
@@ -95,6 +96,8 @@ class OnboardSensing:
                 max_beams=AMCL_BEAMS, alpha_fast=RECOVERY.alpha_fast if cfg.recovery else 0.0
             ),
             odom_start=inbox.odom.copy(),
+            coop=CoopConfig() if cfg.cooperative else None,
+            footprints=info.footprints,
         )
         self.estimates = self.localizer.estimates.copy()
         self._base_grid = base_grid

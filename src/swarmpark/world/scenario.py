@@ -317,7 +317,10 @@ class SensingSpec(_Model):
     and drifting odometry (particle filter against the map); control then uses the estimates
     and the run result reports the localization error. ``truth`` uses the true poses.
     ``recovery`` turns on augmented MCL (injected particles when the scans stop fitting,
-    which finds a kidnapped skid); ``kidnap`` moves skids during the run to test it."""
+    which finds a kidnapped skid); ``kidnap`` moves skids during the run to test it.
+    ``cooperative`` (the default) makes each skid's filter use the neighbours it sees in its
+    scan as landmarks at their estimates (cooperative localization,
+    :mod:`swarmpark.sense.amcl.coop`); ``false`` only masks their returns."""
 
     localization: Literal["truth", "amcl"] = "truth"
     #: The map the skids localize and plan in (map_server YAML, e.g. one built by
@@ -329,6 +332,7 @@ class SensingSpec(_Model):
     range_noise_std_m: NonNegFloat = 0.01
     dropout_prob: Annotated[float, Field(ge=0, lt=1)] = 0.0
     recovery: bool = False
+    cooperative: bool = True
     kidnap: list[KidnapSpec] = []
 
 

@@ -280,3 +280,102 @@ def bench_costmap(quick: bool) -> list[dict]:
             }
         )
     return rows
+
+
+def _timed(fn, repeat: int) -> dict:
+    """:func:`time_call` plus ``cpu_ms``, the process CPU time per call (warm-up included):
+    on a shared machine the wall time measures the other processes too."""
+    t0 = time.process_time()
+    stats = time_call(fn, repeat=repeat)
+    return {**stats, "cpu_ms": (time.process_time() - t0) * 1e3 / (repeat + 1)}
+
+
+@register(
+    "sense.coop",
+    "cooperative localization: one fleet localization step with and without the neighbours "
+    "as landmarks (50 skids in rows in the hangar, 1000-beam scans, 240 scored)",
+    target="cooperation adds at most the filters' own CPU time per tick",
+)
+def bench_coop(quick: bool) -> list[dict]:
+    from swarmpark.core.geometry import Footprint
+    from swarmpark.sense.amcl import FilterConfig, FleetLocalizer, LikelihoodField
+    from swarmpark.sense.amcl.coop import CoopConfig, neighbour_beams, pose_variance
+    from swarmpark.sense.lidar import LidarSpec, beam_angles, prepare_grid, scan
+
+    grid = _hangar()
+    field = LikelihoodField(grid)
+    spec = LidarSpec(range_noise_std_m=0.01)
+    fp = Footprint(length_m=1.25, width_m=0.75, pivot_from_rear_m=0.25)
+    rng = np.random.default_rng(7)
+    n = 50
+    poses, polys = _fleet(n, rng)
+    ranges = scan(
+        spec, poses, prepare_grid(grid), polygons=polys, polygon_owner=np.arange(n), rng=rng
+    )
+    times: dict[str, dict] = {}
+    detected = 0
+    for name, coop in (("off", None), ("on", CoopConfig())):
+        loc = FleetLocalizer(
+            field, spec, poses, rng=np.random.default_rng(8), odom_start=poses.copy(),
+            footprint=fp, footprints=[fp] * n, coop=coop, config=FilterConfig(max_beams=240),
+        )  # fmt: skip
+        odom = poses.copy()
+
+        def step(loc=loc):
+            nonlocal odom
+            odom = odom + np.array([0.01, 0.0, 0.0])  # a little motion: prediction works
+            loc.step(odom, ranges)
+
+        times[name] = _timed(step, repeat=3 if quick else 10)
+    var = pose_variance(loc.covariances, np.full(n, fp.length_m / 2))
+    dirs = beam_angles(spec) + spec.mount_yaw_rad
+    offs, halves = (
+        np.full(n, fp.center_offset_m),
+        np.tile([fp.length_m / 2, fp.width_m / 2], (n, 1)),
+    )
+
+    def detect():
+        nonlocal detected
+        found = [
+            neighbour_beams(
+                i,
+                ranges[i],
+                dirs,
+                (spec.mount_x_m, spec.mount_y_m),
+                spec.max_range_m,
+                loc.estimates,
+                var,
+                offs,
+                halves,
+                field.distance,
+                CoopConfig(),
+            )  # fmt: skip
+            for i in range(n)
+        ]
+        detected = sum(len(f.beams) for f in found if f is not None)
+
+    times["detect"] = _timed(detect, repeat=3 if quick else 10)
+    extra = times["on"]["median_ms"] - times["off"]["median_ms"]
+    extra_cpu = times["on"]["cpu_ms"] - times["off"]["cpu_ms"]
+    rows = [
+        {"case": f"{n} skids, fleet step, cooperation {k}", **times[k], "meets_target": True}
+        for k in ("off", "on")
+    ]
+    rows.append(
+        {
+            "case": f"{n} skids, detection of the neighbours only ({detected} returns)",
+            **times["detect"],
+            "meets_target": True,
+        }
+    )
+    rows.append(
+        {
+            "case": f"{n} skids, cost of cooperation per tick (on - off)",
+            "mean_ms": times["on"]["mean_ms"] - times["off"]["mean_ms"],
+            "median_ms": extra,
+            "max_ms": float("nan"),
+            "cpu_ms": extra_cpu,
+            "meets_target": bool(extra_cpu <= times["off"]["cpu_ms"]),
+        }
+    )
+    return rows

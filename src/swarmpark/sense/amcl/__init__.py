@@ -7,7 +7,8 @@ low-variance resampling (Table 4.4, :mod:`.resample`) when the effective sample 
 KLD-sampling for an adaptive particle count (Fox 2003) and augmented MCL (Table 8.3:
 ``w_slow``/``w_fast``) that injects uniform particles when the scans stop fitting, which
 recovers a kidnapped robot (:mod:`.filter`, settings in :mod:`.config`). :mod:`.fleet` runs one
-filter per skid. The drifting wheel odometry a simulated skid reports is a robot model:
+filter per skid; with :mod:`.coop` each filter also uses the neighbours it sees as landmarks
+(cooperative localization, Fox, Burgard, Kruppa and Thrun 2000). The drifting wheel odometry a simulated skid reports is a robot model:
 :class:`swarmpark.sim.odometry.OdometryDrift`.
 """
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 import warnings
 
 from swarmpark.sense.amcl.config import RECOVERY, FilterConfig, PoseEstimate
+from swarmpark.sense.amcl.coop import CoopConfig
 from swarmpark.sense.amcl.filter import ParticleFilter
 from swarmpark.sense.amcl.fleet import FleetLocalizer, RobotLocalizer, pose_error_summary
 from swarmpark.sense.amcl.likelihood import LikelihoodField
@@ -25,6 +27,7 @@ from swarmpark.sense.amcl.resample import kld_sample_count, low_variance_resampl
 __all__ = [
     "LikelihoodField",
     "FilterConfig",
+    "CoopConfig",
     "RECOVERY",
     "PoseEstimate",
     "ParticleFilter",

@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.sense.amcl.config import FilterConfig, PoseEstimate
+from swarmpark.sense.amcl.coop import LandmarkBeams, rectangle_log_likelihood
 from swarmpark.sense.amcl.likelihood import LikelihoodField
 from swarmpark.sense.amcl.motion import _sample_odometry, relative_motion
 from swarmpark.sense.amcl.resample import (
@@ -158,22 +159,55 @@ class ParticleFilter:
             mean_p[lo : lo + SCORE_BLOCK] = np.exp(ll).mean(axis=1)
         return mean_log, mean_p
 
-    def update(self, ranges: np.ndarray, ignore: np.ndarray | None = None) -> dict:
+    def _landmark_score(
+        self, particles: np.ndarray, ranges: np.ndarray, lm: LandmarkBeams
+    ) -> np.ndarray:
+        """Per particle: the weighted sum of the log-likelihoods of the returns off
+        neighbouring skids, against their outlines (:mod:`.coop`)."""
+        r = np.asarray(ranges, dtype=float).reshape(-1)[lm.beams]
+        a = self._beam_dirs[lm.beams]
+        bx = self.spec.mount_x_m + r * np.cos(a)
+        by = self.spec.mount_y_m + r * np.sin(a)
+        f = self.field
+        out = np.empty(len(particles))
+        for lo in range(0, len(particles), SCORE_BLOCK):
+            p = particles[lo : lo + SCORE_BLOCK]
+            c, s = np.cos(p[:, 2:3]), np.sin(p[:, 2:3])
+            wx = p[:, 0:1] + c * bx - s * by
+            wy = p[:, 1:2] + s * bx + c * by
+            out[lo : lo + SCORE_BLOCK] = rectangle_log_likelihood(
+                wx, wy, lm, f.z_hit, f.z_rand / f.max_range_m
+            )
+        return out
+
+    def update(
+        self,
+        ranges: np.ndarray,
+        ignore: np.ndarray | None = None,
+        landmarks: LandmarkBeams | None = None,
+    ) -> dict:
         """Weigh particles by a scan ``(B,)`` (ranges as from :func:`~.lidar.scan`), then
         resample if the effective sample size is low or random particles are due.
 
-        ``ignore`` ``(B,)`` bool marks beams not to score (returns from other skids, whose
-        positions the fleet knows and the map does not).
+        ``ignore`` ``(B,)`` bool marks beams not to score against the map (returns from other
+        skids, whose positions the fleet knows and the map does not). ``landmarks`` are
+        returns off neighbouring skids scored against their outlines instead (cooperative
+        localization, :mod:`.coop`).
 
         Returns a dict of diagnostics: ``n_particles``, ``n_eff``, ``p_inject``,
         ``resampled``, ``beams``, ``tempering``.
         """
         cfg = self.config
+        lm_ll = None
+        if landmarks is not None and len(landmarks.beams):
+            lm_ll = cfg.likelihood_power * self._landmark_score(self.particles, ranges, landmarks)
         if ignore is not None:
             ranges = np.where(np.asarray(ignore, dtype=bool), np.nan, ranges)
         beams = self._beam_subset(ranges)
         k = len(beams)
         diag = {"beams": k, "p_inject": 0.0, "resampled": False, "tempering": 1.0}
+        if k == 0 and lm_ll is not None:
+            return self._weigh(lm_ll, diag)
         if k > 0 and self._global_pending and cfg.global_candidates > len(self.particles):
             self.particles = self.field.sample_free(cfg.global_candidates, self.rng)
             self.log_w = np.full(cfg.global_candidates, -np.log(cfg.global_candidates))
@@ -196,9 +230,15 @@ class ParticleFilter:
             self.w_slow += cfg.alpha_slow * (w_avg - self.w_slow)
             self.w_fast += cfg.alpha_fast * (w_avg - self.w_fast)
         self.updates += 1
-        beta = _temper(self.log_w, cfg.likelihood_power * k * per_beam, cfg.min_neff_ratio)
+        ll = cfg.likelihood_power * k * per_beam
+        if lm_ll is not None:
+            ll = ll + lm_ll
+        beta = _temper(self.log_w, ll, cfg.min_neff_ratio)
         diag["tempering"] = beta
-        self.log_w = self.log_w + beta * cfg.likelihood_power * k * per_beam
+        if lm_ll is None:  # the map alone, in the order of operations it always had
+            self.log_w = self.log_w + beta * cfg.likelihood_power * k * per_beam
+        else:
+            self.log_w = self.log_w + beta * ll
         self.log_w -= logsumexp(self.log_w)
         ratio = self.w_fast / self.w_slow
         p_inject = max(0.0, 1.0 - ratio / cfg.recovery_ratio) if cfg.alpha_fast > 0 else 0.0
@@ -209,6 +249,19 @@ class ParticleFilter:
         neff = self.n_eff
         if neff < cfg.resample_neff_ratio * len(self.particles) or p_inject > 0:
             self._resample(p_inject, pool)
+            diag["resampled"] = True
+        diag.update(n_particles=len(self.particles), n_eff=self.n_eff)
+        return diag
+
+    def _weigh(self, ll: np.ndarray, diag: dict) -> dict:
+        """Weigh by the log-likelihoods ``ll`` of the neighbours' returns alone (no map beam
+        in range: augmented MCL has nothing to watch) and resample if due."""
+        beta = _temper(self.log_w, ll, self.config.min_neff_ratio)
+        diag["tempering"] = beta
+        self.log_w = self.log_w + beta * ll
+        self.log_w -= logsumexp(self.log_w)
+        if self.n_eff < self.config.resample_neff_ratio * len(self.particles):
+            self._resample(0.0, None)
             diag["resampled"] = True
         diag.update(n_particles=len(self.particles), n_eff=self.n_eff)
         return diag

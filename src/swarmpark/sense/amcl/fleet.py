@@ -11,9 +11,16 @@ import shapely
 
 from swarmpark.core.geometry import Footprint, footprint_corners, pad_polygons, wrap_angle
 from swarmpark.sense.amcl.config import FilterConfig
+from swarmpark.sense.amcl.coop import (
+    CoopConfig,
+    LandmarkBeams,
+    compose_odometry,
+    neighbour_beams,
+    pose_variance,
+)
 from swarmpark.sense.amcl.filter import ParticleFilter
 from swarmpark.sense.amcl.likelihood import LikelihoodField
-from swarmpark.sense.lidar import LidarSpec, scan
+from swarmpark.sense.lidar import LidarSpec, beam_angles, scan
 
 __all__ = ["FleetLocalizer", "RobotLocalizer", "pose_error_summary"]
 
@@ -63,19 +70,35 @@ class RobotLocalizer:
     def step(self, odom: np.ndarray, ranges: np.ndarray, ignore: np.ndarray | None = None):
         """Predict to the odometry pose ``odom`` ``(3,)``, weigh by ``ranges`` ``(B,)`` (beams in
         ``ignore`` not scored) if moved enough; returns the :class:`PoseEstimate`."""
+        self.predict(odom)
+        return self.correct(odom, ranges, ignore)
+
+    def predict(self, odom: np.ndarray) -> None:
+        """Move the particles by the odometry increment to ``odom`` ``(3,)``."""
+        odom = np.asarray(odom, float)
+        if self._odom_prev is not None:
+            self.filter.predict(self._odom_prev, odom)
+        self._odom_prev = odom.copy()
+
+    def correct(
+        self,
+        odom: np.ndarray,
+        ranges: np.ndarray,
+        ignore: np.ndarray | None = None,
+        landmarks: LandmarkBeams | None = None,
+    ):
+        """After :meth:`predict` to ``odom``: weigh by ``ranges`` (and the neighbours'
+        ``landmarks``, see :mod:`.coop`) if moved enough; returns the :class:`PoseEstimate`."""
         odom = np.asarray(odom, float)
         pf = self.filter
-        if self._odom_prev is not None:
-            pf.predict(self._odom_prev, odom)
         last = self._odom_at_update
         moved = np.isnan(last[0]) or (
             np.hypot(*(odom[:2] - last[:2])) >= self.update_min_d_m
             or abs(wrap_angle(odom[2] - last[2])) >= self.update_min_a_rad
         )
         if moved:
-            pf.update(ranges, ignore)
+            pf.update(ranges, ignore, landmarks)
             self._odom_at_update = odom.copy()
-        self._odom_prev = odom.copy()
         return pf.estimate()
 
 
@@ -110,6 +133,11 @@ class FleetLocalizer:
     update_min_d_m, update_min_a_rad
         A skid's scan is used only after it moved this far or turned this much since its last
         sensor update (0 = every step).
+    coop
+        Cooperative localization (:mod:`.coop`): the returns off neighbouring skids are
+        scored against their outlines at their estimates (``None``: not scored, only masked).
+    footprints
+        Every skid's footprint for ``coop`` (default: ``footprint`` for all).
 
     Examples
     --------
@@ -139,9 +167,20 @@ class FleetLocalizer:
         update_min_a_rad: float = 0.0,
         footprint: Footprint | None = None,
         other_skid_margin_m: float = 0.25,
+        coop: CoopConfig | None = None,
+        footprints: list[Footprint] | tuple[Footprint, ...] | None = None,
     ) -> None:
         start = np.asarray(start_poses, dtype=float).reshape(-1, 3)
         n = len(start)
+        self.coop = coop
+        self.field = field
+        if coop is not None:
+            fps = list(footprints) if footprints is not None else [footprint] * n
+            if len(fps) != n or any(f is None for f in fps):
+                raise ValueError(f"fleet: coop needs a footprint for each of the {n} skids")
+            self._halves = np.array([[f.length_m / 2, f.width_m / 2] for f in fps])
+            self._center_offsets = np.array([f.center_offset_m for f in fps])
+            self._beam_dirs = beam_angles(spec) + spec.mount_yaw_rad
         self.spec = spec
         self._grown_body = None
         self.other_skid_margin_m = float(other_skid_margin_m)
@@ -177,6 +216,10 @@ class FleetLocalizer:
         ]
         self.estimates = start.copy() if initial_std is not None else np.full_like(start, np.nan)
         self.covariances = np.zeros((n, 3, 3))
+        # The odometry each estimate was made at (to carry neighbours' estimates forward).
+        self._odom_at_estimate = (
+            np.full_like(start, np.nan) if odom_start is None else odom_start.copy()
+        )
 
     @property
     def filters(self) -> list[ParticleFilter]:
@@ -202,11 +245,39 @@ class FleetLocalizer:
         ranges = np.asarray(ranges, dtype=float).reshape(len(self.robots), -1)
         ignore = self.other_skid_beams(ranges, known_polygons)
         todo = range(len(self.robots)) if robots is None else np.asarray(robots, dtype=int)
+        if self.coop is not None:
+            self._step_coop(odom, ranges, ignore, todo)
+            return self.estimates.copy()
         for i in todo:
             est = self.robots[i].step(odom[i], ranges[i], None if ignore is None else ignore[i])
             self.estimates[i] = est.pose
             self.covariances[i] = est.cov
         return self.estimates.copy()
+
+    def _step_coop(self, odom, ranges, ignore, todo) -> None:
+        """Cooperative step: every reporting skid predicts, then each weighs its scan with the
+        neighbours it detects as landmarks at their estimates carried forward by their
+        odometry (all from before this step's updates, so the order of the skids does not
+        matter)."""
+        todo = np.asarray(list(todo), dtype=int)
+        predicted = compose_odometry(self.estimates, self._odom_at_estimate, odom)
+        var = pose_variance(self.covariances, self._halves[:, 0])
+        mount = (self.spec.mount_x_m, self.spec.mount_y_m)
+        for i in todo:
+            self.robots[i].predict(odom[i])
+        for i in todo:
+            ig = None if ignore is None else ignore[i]
+            lm = neighbour_beams(
+                i, ranges[i], self._beam_dirs, mount, self.spec.max_range_m, predicted, var,
+                self._center_offsets, self._halves, self.field.distance, self.coop,
+            )  # fmt: skip
+            if lm is not None:
+                ig = np.zeros(ranges.shape[1], bool) if ig is None else ig.copy()
+                ig[lm.beams] = True
+            est = self.robots[i].correct(odom[i], ranges[i], ig, lm)
+            self.estimates[i] = est.pose
+            self.covariances[i] = est.cov
+        self._odom_at_estimate[todo] = odom[todo]
 
     def other_skid_beams(
         self, ranges: np.ndarray, known_polygons: np.ndarray | None = None
