@@ -102,3 +102,18 @@ def test_rollout_respects_the_acceleration_limit():
 def test_monitor_params_name_the_bad_field(kw, name):
     with pytest.raises(ValueError, match=f"MonitorParams.{name}"):
         MonitorParams(**kw)
+
+
+def test_a_turn_into_a_wall_alongside_drives_on_straight():
+    """A skid running along a wall with its corner 6 cm from it, commanded to turn towards
+    the wall: every speed with that turn swings the corner into the wall, driving straight
+    does not, so it drives on straight (it used to be stopped for good)."""
+    wall = (0.0, 5.7, 10.0, 6.0)  # a wall above, along the skid
+    raw = np.array([[0.5, 0.6]])  # forwards, turning left (towards the wall)
+    view = make_view([[3.0, 5.24, -0.1]], vel=[[0.5, 0.0]], boxes=[wall])
+    assert np.array_equal(_check(view, raw).commands, [[0.0, 0.0]])  # the plain check
+    res = _check(view, raw, straight=True)
+    assert res.commands[0, 0] > 0.0 and res.commands[0, 1] == 0.0
+    # Without the wall the turn is left alone.
+    open_hall = make_view([[3.0, 5.24, -0.1]], vel=[[0.5, 0.0]])
+    assert np.array_equal(_check(open_hall, raw, straight=True).commands, raw)

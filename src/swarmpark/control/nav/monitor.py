@@ -101,12 +101,14 @@ class CollisionMonitor:
         *,
         robots: bool = True,
         joint: bool = False,
+        straight: bool = False,
     ) -> MonitorResult:
         """Safe commands for robots ``idx`` commanded ``raw`` (others where they are now);
         with ``joint``, also stop pairs whose commands together would bring them into
-        contact (:meth:`joint_check`). ``robots=False`` ignores the other skids."""
-        scales, times = self.scales, self.times
-        n_act, S, T = len(idx), len(self.scales), len(self.times)
+        contact (:meth:`joint_check`); with ``straight``, a skid whose every speed collides
+        only because of its turn drives on straight when that is safe. ``robots=False``
+        ignores the other skids."""
+        scales, S = self.scales, len(self.scales)
         body = scene.skids.grown[idx]
         plain = scene.skids.plain[idx]
         # A skid already inside its margin of something is judged by its plain footprint, or it
@@ -114,6 +116,35 @@ class CollisionMonitor:
         others = footprint_corners(view.poses, scene.skids.plain)
         inside = self.within_margin(view, idx, body, scene, others)
         body = np.where(inside[:, None, None], plain, body)
+        bad, blockers = self._unsafe(view, idx, raw, body, scene, others, robots)
+        # The fastest safe scale; if even turning in place collides, stop turning as well.
+        safe = ~bad.any(axis=2)
+        first_safe = np.where(safe.any(axis=1), np.argmax(safe, axis=1), S - 1)
+        out = raw.copy()
+        out[:, 0] *= scales[first_safe]
+        out[~safe[:, -1]] = 0.0
+        # A skid whose turn is what collides (its corner swings into a wall it drives along)
+        # drives on straight instead, if that is safe, until it has room to turn.
+        turn = np.flatnonzero(~safe.any(axis=1) & (raw[:, 0] != 0.0) & (raw[:, 1] != 0.0))
+        if straight and len(turn):
+            straight = np.column_stack([raw[turn, 0], np.zeros(len(turn))])
+            bad2, _ = self._unsafe(view, idx[turn], straight, body[turn], scene, others, robots)
+            safe2 = ~bad2.any(axis=2)
+            ok = safe2.any(axis=1) & (np.argmax(safe2, axis=1) < S - 1)
+            k = turn[ok]
+            out[k, 0] = raw[k, 0] * scales[np.argmax(safe2[ok], axis=1)]
+            out[k, 1] = 0.0
+        slowed = first_safe > 0
+        blockers = [b if s else set() for b, s in zip(blockers, slowed, strict=True)]
+        if joint and robots:
+            self.joint_check(view, idx, out, body)
+        return MonitorResult(out, blockers, slowed)
+
+    def _unsafe(self, view, idx, raw, body, scene, others, robots: bool):
+        """``(n, S, T)`` whether skid ``idx[k]`` commanded ``raw[k]`` at speed scale ``s``
+        touches something at rollout time ``t``, and who (other skids) it would touch."""
+        scales, times = self.scales, self.times
+        n_act, S, T = len(idx), len(scales), len(times)
         # Poses for every (robot, scale, time), from the current velocity towards the command.
         v_cmd = (raw[:, 0][:, None] * scales[None, :]).ravel()
         w_cmd = np.repeat(raw[:, 1], S)
@@ -123,18 +154,7 @@ class CollisionMonitor:
         bad = self._hits_static(view, corners, scene, group=S * T)
         blockers = self._hits_skids(view, idx, corners, owner, bad, others, scene, robots)
         self._hits_people(view, corners, n_act, bad)
-        bad = bad.reshape(n_act, S, T)
-        # The fastest safe scale; if even turning in place collides, stop turning as well.
-        safe = ~bad.any(axis=2)
-        first_safe = np.where(safe.any(axis=1), np.argmax(safe, axis=1), S - 1)
-        out = raw.copy()
-        out[:, 0] *= scales[first_safe]
-        out[~safe[:, -1]] = 0.0
-        slowed = first_safe > 0
-        blockers = [b if s else set() for b, s in zip(blockers, slowed, strict=True)]
-        if joint and robots:
-            self.joint_check(view, idx, out, body)
-        return MonitorResult(out, blockers, slowed)
+        return bad.reshape(n_act, S, T), blockers
 
     @staticmethod
     def _hits_static(

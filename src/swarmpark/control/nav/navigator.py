@@ -193,7 +193,8 @@ class Navigator:
             )
             raw[man] = mraw
             raw, aside = self._yield(view, idx, raw)
-            cmd[idx] = self._monitor(view, idx, raw)
+            # A skid whose turn alone hits a wall drives on straight (RVO steers instead).
+            cmd[idx] = self._monitor(view, idx, raw, straight=True)
             full = np.zeros((n, 2))
             full[idx] = raw
             self._guard_aside(view, idx[aside], full, cmd)
