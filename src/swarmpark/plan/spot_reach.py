@@ -149,7 +149,7 @@ def spot_reach(
             found = _flood(hits, HEADING_STEPS, np.array([k, r, c], np.int64), seen, queue)
             hits[k, r, c] = keep
         if not found:
-            before = len(fill_order[:n])
+            before = n
             out.append(
                 SpotReach(
                     int(j),
