@@ -7,16 +7,12 @@ only: the core still ticks on the server's event loop). The browser is Debian's 
 
 from __future__ import annotations
 
-import json
-import socket
-import threading
-import time
-import urllib.request
 from pathlib import Path
 
+import liveserver
 import pytest
+from liveserver import BROWSER_MARKS, chromium
 
-CHROMIUM = Path("/usr/bin/chromium")
 DATA = Path(__file__).parent / "data"
 SMALL = DATA / "ui-small.yaml"
 ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
@@ -26,65 +22,21 @@ BOX = [(6.5, 2.0), (10.5, 2.0), (10.5, 6.0), (6.5, 6.0)]
 #: Simulated seconds per wall second: parking the four skids takes ~15 s simulated.
 SPEED = 8.0
 DT_S = 0.05
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--no-first-run",
-    "--disable-sync",
-]
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(
-        not CHROMIUM.exists(), reason="needs Debian's chromium at /usr/bin/chromium"
-    ),
-]
+pytestmark = BROWSER_MARKS
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class LiveServer:
-    """uvicorn serving ``create_app(...)`` from a background thread."""
+class LiveServer(liveserver.LiveServer):
+    """The small UI scenario served live; ``call`` sends ``token`` as a bearer token."""
 
     def __init__(self, **kwargs) -> None:
-        import uvicorn
-
         from swarmpark.server import create_app
 
-        self.app = create_app(SMALL, scenarios_dir=DATA, speed=SPEED, **kwargs)
-        self.port = _free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning")
-        self.server = uvicorn.Server(config)
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
-
-    def __enter__(self) -> LiveServer:
-        self.thread.start()
-        deadline = time.monotonic() + 20
-        while not self.server.started:
-            if time.monotonic() > deadline or not self.thread.is_alive():
-                raise RuntimeError("uvicorn did not start")
-            time.sleep(0.05)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.server.should_exit = True
-        self.thread.join(10)
+        super().__init__(create_app(SMALL, scenarios_dir=DATA, speed=SPEED, **kwargs))
 
     def call(self, method: str, path: str, body=None, token: str | None = None) -> dict:
-        data = None if body is None else json.dumps(body).encode()
-        req = urllib.request.Request(self.url + path, data=data, method=method)
-        req.add_header("Content-Type", "application/json")
-        if token:
-            req.add_header("Authorization", f"Bearer {token}")
-        with urllib.request.urlopen(req, timeout=10) as r:
-            return json.loads(r.read())
+        headers = {"Authorization": f"Bearer {token}"} if token else None
+        return super().call(method, path, body, headers=headers, timeout=10)
 
 
 @pytest.fixture(scope="module")
@@ -95,12 +47,8 @@ def server():
 
 @pytest.fixture(scope="module")
 def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+    with chromium() as b:
         yield b
-        b.close()
 
 
 @pytest.fixture

@@ -9,26 +9,14 @@ only), Debian's chromium at /usr/bin/chromium, nothing downloaded.
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import socket
-import threading
 import time
-import urllib.request
 from pathlib import Path
 
 import pytest
+from liveserver import BROWSER_MARKS, LiveServer, chromium
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--no-first-run",
-    "--disable-sync",
-]
 DATA = Path(__file__).parent / "data"
 ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
 DOC_IMG = Path(__file__).parents[1] / "docs" / "img" / "ui-sensing-1024x768.png"
@@ -36,70 +24,21 @@ DOC_IMG = Path(__file__).parents[1] / "docs" / "img" / "ui-sensing-1024x768.png"
 DETECTED_RGB = (208, 64, 255)
 TRACKED_RGB = (255, 210, 60)
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(
-        not CHROMIUM.exists(), reason="needs Debian's chromium at /usr/bin/chromium"
-    ),
-]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class LiveServer:
-    """uvicorn serving ``create_app(...)`` from a background thread."""
-
-    def __init__(self) -> None:
-        import uvicorn
-
-        from swarmpark.server import create_app
-
-        self.app = create_app(DATA / "ui-people.yaml", scenarios_dir=DATA, speed=2.0)
-        self.port = _free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning")
-        self.server = uvicorn.Server(config)
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
-
-    def __enter__(self) -> LiveServer:
-        self.thread.start()
-        deadline = time.monotonic() + 20
-        while not self.server.started:
-            if time.monotonic() > deadline or not self.thread.is_alive():
-                raise RuntimeError("uvicorn did not start")
-            time.sleep(0.05)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.server.should_exit = True
-        self.thread.join(10)
-
-    def call(self, method: str, path: str, body=None):
-        data = None if body is None else json.dumps(body).encode()
-        req = urllib.request.Request(self.url + path, data=data, method=method)
-        req.add_header("Content-Type", "application/json")
-        with urllib.request.urlopen(req, timeout=30) as r:
-            return json.loads(r.read())
+pytestmark = BROWSER_MARKS
 
 
 @pytest.fixture(scope="module")
 def server():
-    with LiveServer() as s:
+    from swarmpark.server import create_app
+
+    with LiveServer(create_app(DATA / "ui-people.yaml", scenarios_dir=DATA, speed=2.0)) as s:
         yield s
 
 
 @pytest.fixture(scope="module")
 def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+    with chromium() as b:
         yield b
-        b.close()
 
 
 def _open(browser, server, scenario: str, n_robots: int):

@@ -4,45 +4,20 @@ screenshot in docs/img/replay.png."""
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
-import socket
-import threading
 import time
-import urllib.request
 from pathlib import Path
 
 import numpy as np
 import pytest
-
-CHROMIUM = Path("/usr/bin/chromium")
-#: As in test_browser.py: Debian's chromium, headless, nothing downloaded.
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--no-first-run",
-    "--disable-sync",
-]
+from liveserver import BROWSER_MARKS, LiveServer, chromium
 
 DATA = Path(__file__).parent / "data"
 ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
 DOC_IMG = Path(__file__).parents[1] / "docs" / "img" / "replay.png"
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(
-        not CHROMIUM.exists(), reason="needs Debian's chromium at /usr/bin/chromium"
-    ),
-]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+pytestmark = BROWSER_MARKS
 
 
 @pytest.fixture(scope="module")
@@ -60,46 +35,21 @@ def recording(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def replay_server(recording):
-    import uvicorn
-
     from swarmpark.record.reader import load_recording
     from swarmpark.record.replay import create_replay_app
 
     rec = load_recording(recording)
-    port = _free_port()
-    server = uvicorn.Server(
-        uvicorn.Config(create_replay_app(rec), host="127.0.0.1", port=port, log_level="warning")
-    )
-    th = threading.Thread(target=server.run, daemon=True)
-    th.start()
-    deadline = time.monotonic() + 20
-    while not server.started:
-        assert time.monotonic() < deadline and th.is_alive(), "uvicorn did not start"
-        time.sleep(0.05)
-    yield f"http://127.0.0.1:{port}", rec
-    server.should_exit = True
-    th.join(10)
-
-
-def _post(url: str, body: dict) -> dict:
-    req = urllib.request.Request(url, data=json.dumps(body).encode(), method="POST")
-    req.add_header("Content-Type", "application/json")
-    with urllib.request.urlopen(req, timeout=10) as r:
-        return json.loads(r.read())
+    with LiveServer(create_replay_app(rec)) as srv:
+        yield srv, rec
 
 
 def test_replay_seeks_and_draws_the_recorded_poses(replay_server):
-    from playwright.sync_api import sync_playwright
-
-    url, rec = replay_server
-    with sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-        )
+    srv, rec = replay_server
+    with chromium() as browser:
         pg = browser.new_page(viewport={"width": 1400, "height": 850})
         errors: list[str] = []
         pg.on("pageerror", lambda e: errors.append(str(e)))
-        pg.goto(url + "/")
+        pg.goto(srv.url + "/")
         pg.wait_for_function(
             "document.querySelectorAll('#status-table tbody tr[data-state]').length === 3"
         )
@@ -160,6 +110,5 @@ def test_replay_seeks_and_draws_the_recorded_poses(replay_server):
         t = pg.evaluate("window.swarmpark.S.frame.t_s")
         time.sleep(0.3)
         assert pg.evaluate("window.swarmpark.S.frame.t_s") == t
-        assert _post(url + "/api/replay", {})["speed"] == 4.0
-        browser.close()
+        assert srv.call("POST", "/api/replay", {}, timeout=10)["speed"] == 4.0
     assert not errors, errors

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import socket
-import threading
 import time
 import urllib.error
 import urllib.request
@@ -20,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from liveserver import LiveServer
 from starlette.websockets import WebSocketDisconnect
 
 from swarmpark.core.limits import (
@@ -44,50 +43,6 @@ BOX = [[6.5, 2.0], [10.5, 2.0], [10.5, 6.0], [6.5, 6.0]]
 SECRET = "s3cret-for-tests"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Live:
-    """uvicorn serving an app from a background thread (test harness only)."""
-
-    def __init__(self, app) -> None:
-        import uvicorn
-
-        self.app = app
-        self.port = _free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        config = uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="error")
-        self.server = uvicorn.Server(config)
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
-
-    def __enter__(self) -> Live:
-        self.thread.start()
-        deadline = time.monotonic() + 20
-        while not self.server.started:
-            assert time.monotonic() < deadline and self.thread.is_alive(), "uvicorn did not start"
-            time.sleep(0.02)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.server.should_exit = True
-        self.thread.join(10)
-
-    def call(self, method: str, path: str, body=None, headers=None, timeout=30.0):
-        data = None if body is None else json.dumps(body).encode()
-        req = urllib.request.Request(self.url + path, data=data, method=method)
-        req.add_header("Content-Type", "application/json")
-        for k, v in (headers or {}).items():
-            req.add_header(k, v)
-        try:
-            with urllib.request.urlopen(req, timeout=timeout) as r:
-                return r.status, json.loads(r.read() or b"null")
-        except urllib.error.HTTPError as e:
-            return e.code, json.loads(e.read() or b"null")
-
-
 def _circle(n: int, cx: float, cy: float, r: float) -> list[list[float]]:
     th = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
     return np.column_stack([cx + r * np.cos(th), cy + r * np.sin(th)]).round(6).tolist()
@@ -98,13 +53,15 @@ def _circle(n: int, cx: float, cy: float, r: float) -> list[list[float]]:
 
 def test_estop_during_heavy_previews_and_a_park_halts_every_skid_within_half_a_second():
     app = create_app(SMALL, scenarios_dir=DATA, speed=1.0)
-    with Live(app) as srv:
+    with LiveServer(app, log_level="error") as srv:
         for k, rid in enumerate(ROBOTS):
-            code, _ = srv.call("POST", "/api/goto", {"robot": rid, "pose": [9.0, 1.5 + 1.6 * k, 0]})
+            code, _ = srv.status_call(
+                "POST", "/api/goto", {"robot": rid, "pose": [9.0, 1.5 + 1.6 * k, 0]}
+            )
             assert code == 200
         deadline = time.monotonic() + 10
         while True:  # wait until they drive
-            _, st = srv.call("GET", "/api/state")
+            _, st = srv.status_call("GET", "/api/state")
             if all(r[4] > 0.05 for r in st["robots"]):
                 break
             assert time.monotonic() < deadline, "the skids never started"
@@ -117,15 +74,15 @@ def test_estop_during_heavy_previews_and_a_park_halts_every_skid_within_half_a_s
         ]
         with ThreadPoolExecutor(len(heavy)) as pool:
             t_sent = time.monotonic()
-            futures = [pool.submit(srv.call, "POST", p, b) for p, b in heavy]
+            futures = [pool.submit(srv.status_call, "POST", p, b) for p, b in heavy]
             time.sleep(0.3)  # the bodies are read and the work is under way
             t0 = time.monotonic()
-            code, out = srv.call("POST", "/api/estop")
+            code, out = srv.status_call("POST", "/api/estop")
             answered = time.monotonic() - t0
             assert code == 200 and out["accepted"]
             halted = None
             while time.monotonic() - t0 < 3.0:
-                _, st = srv.call("GET", "/api/state")
+                _, st = srv.status_call("GET", "/api/state")
                 if all(r[4] == 0.0 for r in st["robots"]) and st["estop"]:
                     halted = time.monotonic() - t0
                     break
@@ -227,7 +184,7 @@ def test_ids_robot_lists_and_polygons_are_capped(client):
 
 def test_a_5_mb_body_is_refused_with_413_within_a_second():
     app = create_app(SMALL, autostart=False, scenarios_dir=DATA)
-    with Live(app) as srv:
+    with LiveServer(app, log_level="error") as srv:
         body = b'{"robot": "' + b"x" * 5_000_000 + b'", "pose": [1, 1, 0]}'
         req = urllib.request.Request(srv.url + "/api/goto", data=body, method="POST")
         req.add_header("Content-Type", "application/json")
@@ -239,7 +196,7 @@ def test_a_5_mb_body_is_refused_with_413_within_a_second():
             assert e.value.code == 413
         assert took < 1.0, took
         # Under the cap, the same path still works.
-        assert srv.call("POST", "/api/goto", {"robot": "s1", "pose": [5, 2, 0]})[0] == 200
+        assert srv.status_call("POST", "/api/goto", {"robot": "s1", "pose": [5, 2, 0]})[0] == 200
     c = TestClient(create_app(SMALL, autostart=False, scenarios_dir=DATA))
     r = c.post("/api/goto", content=b"x" * (MAX_BODY_BYTES + 1))
     assert r.status_code == 413 and "over the limit" in r.json()["message"]
