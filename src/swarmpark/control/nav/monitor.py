@@ -125,20 +125,27 @@ class CollisionMonitor:
         out[~safe[:, -1]] = 0.0
         # A skid whose turn is what collides (its corner swings into a wall it drives along)
         # drives on straight instead, if that is safe, until it has room to turn.
-        turn = np.flatnonzero(~safe.any(axis=1) & (raw[:, 0] != 0.0) & (raw[:, 1] != 0.0))
-        if straight and len(turn):
-            straight = np.column_stack([raw[turn, 0], np.zeros(len(turn))])
-            bad2, _ = self._unsafe(view, idx[turn], straight, body[turn], scene, others, robots)
-            safe2 = ~bad2.any(axis=2)
-            ok = safe2.any(axis=1) & (np.argmax(safe2, axis=1) < S - 1)
-            k = turn[ok]
-            out[k, 0] = raw[k, 0] * scales[np.argmax(safe2[ok], axis=1)]
-            out[k, 1] = 0.0
+        if straight:
+            self._straight_on(view, idx, raw, out, ~safe.any(axis=1), body, scene, others, robots)
         slowed = first_safe > 0
         blockers = [b if s else set() for b, s in zip(blockers, slowed, strict=True)]
         if joint and robots:
             self.joint_check(view, idx, out, body)
         return MonitorResult(out, blockers, slowed)
+
+    def _straight_on(self, view, idx, raw, out, stuck, body, scene, others, robots) -> None:
+        """Rows ``stuck`` (no speed safe with their turn) that drive and turn get the fastest
+        safe speed without the turn, if one is above 0 (in place on ``out``)."""
+        turn = np.flatnonzero(stuck & (raw[:, 0] != 0.0) & (raw[:, 1] != 0.0))
+        if not len(turn):
+            return
+        cmd = np.column_stack([raw[turn, 0], np.zeros(len(turn))])
+        bad, _ = self._unsafe(view, idx[turn], cmd, body[turn], scene, others, robots)
+        safe = ~bad.any(axis=2)
+        ok = safe.any(axis=1) & (np.argmax(safe, axis=1) < len(self.scales) - 1)
+        k = turn[ok]
+        out[k, 0] = raw[k, 0] * self.scales[np.argmax(safe[ok], axis=1)]
+        out[k, 1] = 0.0
 
     def _unsafe(self, view, idx, raw, body, scene, others, robots: bool):
         """``(n, S, T)`` whether skid ``idx[k]`` commanded ``raw[k]`` at speed scale ``s``
