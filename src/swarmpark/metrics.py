@@ -22,7 +22,7 @@ from swarmpark.core.progress import (
     remaining_m,
 )
 from swarmpark.plan.grid import build_costmap, path_length_matrix
-from swarmpark.plan.spot_reach import as_report, spot_reach
+from swarmpark.plan.spot_reach import as_report
 
 __all__ = [
     "POSITION_TOL_M",
@@ -97,6 +97,7 @@ class MetricsRecorder:
         # it is computed (once) when asked for, outside the control tick.
         self._bound_inputs: list[tuple] = []
         self._spot_checks: list[tuple] = []
+        self._spots: list[dict] = []
         self._bound: float | None = None
         self.path_length = np.zeros(n)
         self._prev = np.asarray(self.start_poses, float).copy()
@@ -134,22 +135,20 @@ class MetricsRecorder:
             )
         )
 
-    def defer_spot_check(self, t_s: float, where: tuple, footprints: list, fill_order) -> None:
-        """Keep a park command's layout for the manoeuvre check of its spots
-        (:func:`swarmpark.plan.spot_reach.spot_reach`; ``where``: occupied cells, origin,
-        resolution, spot poses), run by :attr:`unreachable_spots` after the run, not inside
-        the control tick."""
-        self._spot_checks.append((float(t_s), where, list(footprints), tuple(fill_order)))
+    def defer_spot_check(self, t_s: float, check: Callable[[], list]) -> None:
+        """Keep the manoeuvre check of a park command's spots (``check()`` gives the
+        :class:`~swarmpark.plan.spot_reach.SpotReach` flags), run by
+        :attr:`unreachable_spots` after the run, not inside the control tick."""
+        self._spot_checks.append((float(t_s), check))
 
     @property
     def unreachable_spots(self) -> list[dict]:
         """The spots of the run's park commands that no manoeuvre reaches in fill order, each
-        with the time of its command (``t_s``)."""
-        out = []
-        for t_s, (occupied, origin, res, goals), fps, order in self._spot_checks:
-            flags = spot_reach(occupied, origin, res, goals, fps, order)
-            out += [{"t_s": round(t_s, 3), **f} for f in as_report(flags)]
-        return out
+        with the time of its command (``t_s``); each check runs once, on first use."""
+        while self._spot_checks:
+            t_s, check = self._spot_checks.pop(0)
+            self._spots += [{"t_s": round(t_s, 3), **f} for f in as_report(check())]
+        return list(self._spots)
 
     @property
     def lower_bound(self) -> float | None:

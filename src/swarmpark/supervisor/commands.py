@@ -10,6 +10,7 @@ hysteresis (2018 Algorithm 2).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -226,14 +227,21 @@ class CommandsMixin:
                 f"manoeuvre check skipped: {len(goals)} spots (checked up to {MAX_REACH_CHECKED})"
             ]
             return
-        grid = self.world.grid
-        flagged = spot_reach(grid.occupied, grid.origin, grid.resolution_m, goals, fps, order)
+        flagged = self._spot_check(goals, fps, order)()
         if not flagged:
             return
         report["unreachable_spots"] = as_report(flagged)
         report["notices"] = list(report.get("notices", [])) + [
             f"spot {f.spot} at ({f.pose[0]:.2f}, {f.pose[1]:.2f}): {f.reason}" for f in flagged
         ]
+
+    def _spot_check(self, goals: np.ndarray, fps, order):
+        """The manoeuvre check of a layout's spots on the map as it is now, to run now or
+        later (:func:`swarmpark.plan.spot_reach.spot_reach`)."""
+        grid = self.world.grid
+        return partial(
+            spot_reach, grid.occupied, grid.origin, grid.resolution_m, goals, list(fps), order
+        )
 
     def apply_park(self, plan: ParkPlan | str) -> Outcome:
         """Commit a plan of :meth:`prepare_park` (cheap; refused if it went stale)."""
@@ -251,13 +259,9 @@ class CommandsMixin:
         self._set_goals(idx, goals[group.goal_of])
         self.metrics.defer_lower_bound(*plan.bound_inputs)
         if not plan.reach_checked and len(goals) <= MAX_REACH_CHECKED:
-            grid = self.world.grid
-            self.metrics.defer_spot_check(
-                self.t,
-                (grid.occupied, grid.origin, grid.resolution_m, np.array(goals)),
-                [self.info.footprints[i] for i in idx],
-                group.fill_order,
-            )
+            fps = [self.info.footprints[i] for i in idx]
+            check = self._spot_check(np.array(goals), fps, tuple(group.fill_order))
+            self.metrics.defer_spot_check(self.t, check)
         extra = {}
         if group.report.get("unreachable_spots"):
             extra["unreachable_spots"] = group.report["unreachable_spots"]

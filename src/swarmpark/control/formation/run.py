@@ -23,7 +23,7 @@ from swarmpark.control.formation import (
     sample_reference,
     track_unicycle,
 )
-from swarmpark.core.geometry import Footprint, rotation
+from swarmpark.core.geometry import Footprint, rotation, wrap_angle
 from swarmpark.core.paths import SplinePath
 
 __all__ = ["FormationRun", "FormationError"]
@@ -102,17 +102,13 @@ def _spline(pts: np.ndarray, pose: np.ndarray, k: int) -> SplinePath:
             field_name=f"formation.paths[{k}]",
         )
     except ValueError as exc:
-        heading = np.degrees(abs(_wrap(_last_heading(pts[:2]) - float(pose[2]))))
+        heading = np.degrees(abs(wrap_angle(_last_heading(pts[:2]) - float(pose[2]))))
         why = (
             f" (robot {k} faces {heading:.0f} deg away from where its path goes: turn it first)"
             if heading > 90.0
             else ""
         )
         raise FormationError(f"{exc}{why}") from None
-
-
-def _wrap(a: float) -> float:
-    return float((a + np.pi) % (2 * np.pi) - np.pi)
 
 
 def _follower_waypoints(leader_wps: np.ndarray, poses: np.ndarray, offsets: np.ndarray):
