@@ -68,10 +68,17 @@ def test_robot_robot_contact_names_both_and_nothing_tunnels():
     assert [(c.a, c.b, c.kind) for c in contacts] == [("a", "b", "robot-robot")]
 
 
-def test_person_waits_for_a_robot_in_its_way():
+def test_person_who_does_not_react_walks_into_a_robot_in_its_way():
     world = make_world(
         robots=[{"id": "a", "pose": [5.0, 3.0, 0.0]}],
-        obstacles=[{"radius_m": 0.3, "waypoints": [[5.0, 5.5], [5.0, 0.5]], "speed_mps": 1.0}],
+        obstacles=[
+            {
+                "radius_m": 0.3,
+                "waypoints": [[5.0, 5.5], [5.0, 0.5]],
+                "speed_mps": 1.0,
+                "reacts": False,
+            }
+        ],
     )
     sim = Simulator(world)
     contacts = []

@@ -293,9 +293,12 @@ class SimLink:
                 ],
                 dtype=bool,
             )
+
             speed = np.array([p.speed_mps for p in sim.people])
             dirn = ahead - ppos
             norm = np.linalg.norm(dirn, axis=1, keepdims=True)
+            # A reacting person standing for a skid has pace 0, one backing off a negative one.
+            speed = speed * sim.reaction.pace
             pvel = np.where(
                 (norm > 0) & moving[:, None], dirn / np.maximum(norm, 1e-12) * speed[:, None], 0.0
             )

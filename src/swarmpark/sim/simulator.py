@@ -4,7 +4,13 @@ One :meth:`Simulator.step` takes commanded ``(v, omega)`` for every skid, applie
 acceleration and speed limits, integrates the unicycle about each pivot exactly, and checks
 the proposed footprints against each other, the static solids and the people. A motion that
 would overlap anything is rejected for that step (the skid keeps its pose and stops, a person
-waits), so nothing tunnels through anything; the contact is recorded with both parties.
+waits), so nothing tunnels through anything; the contact is recorded with both parties. A
+walking person who meets a skid gives way first: the skid's own move is then judged against
+the person where they stood (so a skid driving off is not held by a person walking after it).
+
+People who react (the default, ``reacts`` in the scenario) stop short of a skid in their way,
+wait, and back off if it cannot leave otherwise (:mod:`swarmpark.sim.people`). One who does
+not react walks into the skid (a contact of kind ``person-robot``, not the fleet's).
 
 The same step also measures every skid's clearance (footprint distance) to the nearest other
 skid and the nearest static solid, up to :data:`CLEARANCE_RANGE_M`.
@@ -28,6 +34,7 @@ from swarmpark.core.geometry import (
     pivot_to_center,
     rect_disc_gap,
 )
+from swarmpark.sim.people import PeopleReaction
 from swarmpark.world.scenario import World
 
 __all__ = ["Simulator", "Contact", "StepResult", "CLEARANCE_RANGE_M"]
@@ -65,7 +72,8 @@ class Simulator:
     """Deterministic simulation of a :class:`~swarmpark.world.scenario.World`.
 
     State: ``t`` (s), ``poses`` ``(N, 3)`` pivot poses, ``vel`` ``(N, 2)`` actual ``(v, omega)``,
-    ``person_s`` walked distance of every person.
+    ``person_s`` walked distance of every person, ``person_held`` the people who stood or
+    backed off the last step to let a skid in their way go (``reaction.pace`` says which).
     """
 
     def __init__(self, world: World) -> None:
@@ -88,6 +96,9 @@ class Simulator:
         self.people = list(world.people)
         self.person_s = np.zeros(len(self.people))
         self.person_radius = np.array([p.radius_m for p in self.people])
+        self.person_reacts = np.array([p.reacts for p in self.people], dtype=bool)
+        self.person_held = np.zeros(len(self.people), dtype=bool)
+        self.reaction = PeopleReaction(self.people)
 
         # Static solids: convex pieces, with an STR-tree over their bounding boxes.
         self.static_pieces, self.static_owner = world.static_convex_pieces()
@@ -156,7 +167,7 @@ class Simulator:
         if hold is not None:
             vel[hold] = 0.0
         proposed = integrate_unicycle(self.poses, vel[:, 0], vel[:, 1], dt)
-        new_s = self._people_progress(dt)
+        new_s = self._people_react(self._people_progress(dt))
 
         # Reject colliding motion until the configuration is clear. Reverting everyone involved
         # always terminates: the previous configuration was clear. After the first pass only
@@ -172,10 +183,15 @@ class Simulator:
             s = np.where(person_ok, new_s, self.person_s)
             bad_r, bad_p, found = self._collisions(poses, s, focus_r, focus_p)
             contacts |= found
-            revert_r = bad_r & robot_ok & robot_moves
             revert_p = bad_p & person_ok & person_moves
+            if revert_p.any():
+                # People give way first; the skids they met are judged again against the
+                # people where they stood (a skid driving off may go on).
+                person_ok &= ~revert_p
+                focus_r, focus_p = bad_r & robot_ok & robot_moves, revert_p
+                continue
+            revert_r = bad_r & robot_ok & robot_moves
             robot_ok &= ~revert_r
-            person_ok &= ~revert_p
             focus_r, focus_p = revert_r, revert_p
         contacts = self._blame_people(contacts, proposed)
         self.poses = np.where(robot_ok[:, None], proposed, self.poses)
@@ -212,6 +228,18 @@ class Simulator:
                 gap = rect_disc_gap(corners, before[j : j + 1], self.person_radius[j : j + 1])
                 k = "robot-person" if gap[0] < -TOUCH_TOLERANCE_M else "person-robot"
             out.add((a, b, k))
+        return out
+
+    def _people_react(self, new_s: np.ndarray) -> np.ndarray:
+        """Walked distances ``new_s`` after the people who react have reacted to the skids
+        where they stand now (:mod:`swarmpark.sim.people`)."""
+        if not self.person_reacts.any():
+            return new_s
+        centers = pivot_to_center(self.poses, self.center_offset)
+        out = self.reaction.step(
+            self.person_s, new_s, self.dt, self.corners(), centers, self.circumradius
+        )
+        self.person_held = self.reaction.pace <= 0.0
         return out
 
     def _people_progress(self, dt: float) -> np.ndarray:

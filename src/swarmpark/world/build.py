@@ -45,7 +45,9 @@ class RobotConfig:
 @dataclass(frozen=True)
 class Person:
     """A moving obstacle: a disc walking a polyline at constant speed from ``start_s``,
-    standing ``waits_s[i]`` seconds at waypoint ``i`` when given.
+    standing ``waits_s[i]`` seconds at waypoint ``i`` when given. A person who ``reacts``
+    stops short of a skid in the way (the simulator holds their walk, see
+    :meth:`swarmpark.sim.simulator.Simulator.step`).
 
     The walked distance ``s`` counts a wait as ``speed * wait`` metres spent in place, so the
     simulator advances every person the same way whether it walks or stands.
@@ -58,6 +60,7 @@ class Person:
     start_s: float
     loop: bool
     waits_s: np.ndarray | None = None  # (W,)
+    reacts: bool = True
 
     def _route(self) -> tuple[np.ndarray, np.ndarray]:
         """Route points and the length of each leg (waits as legs that stay in place)."""
@@ -225,6 +228,7 @@ def build_world(scn: Scenario) -> World:
                     o.start_s,
                     o.loop,
                     None if o.waits_s is None else np.asarray(o.waits_s, float),
+                    o.reacts,
                 )
             )
     pid = [p.id for p in people]

@@ -192,6 +192,9 @@ class PersonSpec(_Model):
     loop: bool = False
     #: Seconds the person stands at each waypoint before walking on (one per waypoint).
     waits_s: list[NonNegFloat] | None = None
+    #: The person stops short of a skid in their way and walks on once it has left (as people
+    #: do); false keeps them walking their route into whatever stands there (adversarial tests).
+    reacts: bool = True
 
     @model_validator(mode="after")
     def _one_wait_per_waypoint(self) -> PersonSpec:
