@@ -48,24 +48,10 @@ def test_the_sailor_who_sets_off_late_never_meets_a_skid_from_perturbed_starts(s
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "seed",
-    [
-        1,
-        2,
-        3,
-        pytest.param(
-            4,
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="a4, docking from its perturbed start, flees along the walker's route "
-                "(its axis nearly along the walk) and cannot get back past the waiting walker",
-            ),
-        ),
-        5,
-    ],
-)
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
 def test_a_walker_through_the_formation_from_perturbed_starts_parks_without_contact(seed):
+    # Seeds 2 and 4 had the walker walk into a skid still docking from its start; the walker
+    # now waits for a skid busy in the aisle before reaching it (sim/people.py).
     r = run_world(_perturbed("person-through-formation.yaml", seed)).result
     assert r["collisions"] == [], r["collisions"]
     assert r["success"], {k: v["final_pose"] for k, v in r["robots"].items() if not v["parked"]}

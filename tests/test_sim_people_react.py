@@ -9,16 +9,21 @@ from helpers import make_world
 
 from swarmpark.core.geometry import footprint_corners, rect_disc_gap
 from swarmpark.sim.link import SimLink
-from swarmpark.sim.people import PATIENCE_S, RETREAT_M, STOP_AHEAD_M
+from swarmpark.sim.people import PATIENCE_S, RETREAT_M, STOP_AHEAD_M, STOP_AHEAD_STILL_M
 from swarmpark.sim.simulator import Simulator
 from swarmpark.world.scenario import ScenarioError
 
 
-def crossing(reacts=True, start_s=0.0, robots=None):
-    """A person walking south at 1 m/s across (5, 3), where skid ``a`` stands facing east."""
-    person = {"radius_m": 0.3, "waypoints": [[5.0, 5.5], [5.0, 0.5]], "speed_mps": 1.0}
-    person.update(start_s=start_s, reacts=reacts)
-    return make_world(robots=robots or [{"id": "a", "pose": [5.0, 3.0, 0.0]}], obstacles=[person])
+def crossing(reacts=True, start_y=10.5, robots=None):
+    """A person walking south at 1 m/s from (5, start_y) across (5, 3), where skid ``a``
+    stands facing east (its left side at y = 3.4), in a 10 x 12 m room."""
+    person = {"radius_m": 0.3, "waypoints": [[5.0, start_y], [5.0, 0.5]], "speed_mps": 1.0}
+    person.update(reacts=reacts)
+    return make_world(
+        map={"size_m": [10, 12], "resolution_m": 0.05},
+        robots=robots or [{"id": "a", "pose": [5.0, 3.0, 0.0]}],
+        obstacles=[person],
+    )
 
 
 def gap(sim):
@@ -34,24 +39,43 @@ def run(sim, steps, cmd=None):
     return contacts
 
 
-def test_a_reacting_person_stops_short_of_a_standing_skid():
+def test_a_reacting_person_stops_well_short_of_a_standing_skid():
     sim = Simulator(crossing())
-    contacts = run(sim, 30)  # 1.5 s: 1.5 m walked of the 2.1 m to the skid's side
-    contacts += run(sim, 20)  # 1 s more: it would have reached the skid by now
+    contacts = []
+    while not sim.person_held[0] and sim.t < 8.0:  # by 6.8 s they would reach the skid
+        contacts += run(sim, 1)
     assert contacts == []
     g = gap(sim)
-    assert 0.0 < g <= STOP_AHEAD_M + 1.0 * sim.dt + 1e-9  # one step short of the look-ahead
+    # A skid standing in the way: they wait STOP_AHEAD_STILL_M short (one step's rounding).
+    assert STOP_AHEAD_STILL_M - 1e-9 <= g <= STOP_AHEAD_STILL_M + 1.0 * sim.dt + 1e-9
     assert sim.person_held[0] and sim.reaction.pace[0] == 0.0
     assert not sim.people_done()
 
 
+def test_a_reacting_person_walks_on_behind_a_skid_driving_across():
+    # Skid a drives east at 0.5 m/s across the route as the person arrives: they stop just
+    # short of it (not STOP_AHEAD_STILL_M: it is on its way) and walk on behind it.
+    sim = Simulator(crossing(robots=[{"id": "a", "pose": [1.5, 3.0, 0.0]}]))
+    gaps, held = [], []
+    contacts = []
+    for _ in range(240):
+        contacts += sim.step(np.array([[0.5, 0.0]])).new_contacts
+        gaps.append(gap(sim))
+        held.append(bool(sim.person_held[0]))
+    assert contacts == []
+    assert any(held)  # they did stop for it ...
+    assert 0.0 < min(gaps) <= STOP_AHEAD_M + 1.0 * sim.dt + 1e-9  # ... just short of it
+    assert run(sim, 100) == []  # the skid stops at x = 7.5, off the route
+    assert sim.people_done()
+
+
 def test_a_reacting_person_walks_on_once_the_skid_has_left():
     sim = Simulator(crossing())
-    contacts = run(sim, 40)
+    contacts = run(sim, 160)
     assert sim.person_held[0]
     # The skid drives 2.5 m east, out of the route: the person walks on to the end.
     contacts += run(sim, 100, [[0.5, 0.0]])
-    contacts += run(sim, 100)
+    contacts += run(sim, 200)
     assert contacts == []
     assert sim.poses[0, 0] > 7.0
     assert sim.people_done()
@@ -93,7 +117,7 @@ def test_a_reacting_person_passes_alongside_a_skid_without_stopping():
 
 def test_a_person_who_does_not_react_walks_into_a_standing_skid_not_the_fleets_contact():
     sim = Simulator(crossing(reacts=False))
-    contacts = run(sim, 60)
+    contacts = run(sim, 200)
     assert [(c.a, c.b, c.kind) for c in contacts] == [("a", "person0", "person-robot")]
     assert gap(sim) >= -1e-9  # stopped at the skid by the simulator, never inside it
     assert not sim.reaction.pace[0] == 0.0  # not a reaction: the simulator held them
@@ -102,7 +126,7 @@ def test_a_person_who_does_not_react_walks_into_a_standing_skid_not_the_fleets_c
 def test_a_skid_driving_off_is_not_held_by_a_person_walking_after_it():
     # The person (not reacting) walks into the skid's left side as the skid drives east out
     # of the route: the skid gets away; the person waits at most for it to pass.
-    sim = Simulator(crossing(reacts=False, robots=[{"id": "a", "pose": [5.0, 3.0, 0.0]}]))
+    sim = Simulator(crossing(reacts=False, start_y=5.5))
     run(sim, 36)  # the person is 0.1 m off the skid's side by now
     x0 = float(sim.poses[0, 0])
     contacts = run(sim, 60, [[0.5, 0.0]])

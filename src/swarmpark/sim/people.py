@@ -6,7 +6,10 @@ machine stands in their way, in the spirit of the reactive pedestrians of crowd 
 (social force, ORCA), but kept to the route so a scenario stays easy to read:
 
 * **Stop short.** When the next :data:`STOP_AHEAD_M` of the walk would enter a skid's
-  footprint, where the skid stands now, the person stands.
+  footprint, where the skid stands now, the person stands; for a skid standing still or
+  manoeuvring slowly (under :data:`SLOW_MPS`) in their way they stop already
+  :data:`STOP_AHEAD_STILL_M` short, as people wait for a machine busy in a narrow aisle
+  rather than walk up to it (while they walk behind one that drives across).
 * **Wait.** They walk on once the route is clear to :data:`CLEAR_PAST_M` past where it met
   the skid, and for at least :data:`CLEAR_AHEAD_M` ahead (not on the heels of a skid that
   drives off along their route).
@@ -31,6 +34,8 @@ from swarmpark.core.geometry import TOUCH_TOLERANCE_M, rect_disc_gap
 __all__ = [
     "PeopleReaction",
     "STOP_AHEAD_M",
+    "STOP_AHEAD_STILL_M",
+    "SLOW_MPS",
     "CLEAR_PAST_M",
     "CLEAR_AHEAD_M",
     "PATIENCE_S",
@@ -41,6 +46,10 @@ __all__ = [
 #: A person stands while their walk this far ahead would enter a skid's footprint (a little
 #: over two steps at walking speed: they stop short of the skid, not against it).
 STOP_AHEAD_M = 0.15
+#: ... and this far short of a skid slower than SLOW_MPS (standing, docking or turning; skids
+#: cruise at 0.5 m/s).
+STOP_AHEAD_STILL_M = 2.5
+SLOW_MPS = 0.3
 #: The walk is checked at this spacing.
 SAMPLE_M = 0.05
 #: They walk on once the route is clear this far past where it met the skid, and at least
@@ -77,6 +86,8 @@ class PeopleReaction:
         self.held_s = np.zeros(k)
         #: Route position where the person started backing off (NaN: not backing off).
         self.retreat_from = np.full(k, np.nan)
+        #: Which skids are slow this step.
+        self._slow = np.zeros(0, dtype=bool)
 
     def step(
         self,
@@ -86,6 +97,7 @@ class PeopleReaction:
         corners: np.ndarray,
         centers: np.ndarray,
         circumradius: np.ndarray,
+        speed: np.ndarray | None = None,
     ) -> np.ndarray:
         """Walked distances after the reaction.
 
@@ -98,11 +110,15 @@ class PeopleReaction:
         corners, centers, circumradius
             The skids where they stand: footprints ``(N, 4, 2)``, centres ``(N, 2)`` and
             circumradii ``(N,)``.
+        speed
+            ``(N,)`` the skids' speeds (m/s; None: all standing).
         """
         out = np.array(new_s, dtype=float, copy=True)
         self.pace[:] = 1.0
         if not len(corners):
             return out
+        slow = np.ones(len(corners), bool) if speed is None else np.abs(speed) < SLOW_MPS
+        self._slow = slow
         for k in np.flatnonzero(self.reacts):
             out[k] = self._one(k, float(s[k]), float(new_s[k]), dt, corners, centers, circumradius)
         return out
@@ -118,6 +134,11 @@ class PeopleReaction:
         if new_s <= s:
             return new_s  # not walking (not started, or done)
         hit = self._first_hit(k, new_s, STOP_AHEAD_M, corners, centers, circumradius)
+        slow = self._slow
+        if hit is None and slow.any():
+            hit = self._first_hit(
+                k, new_s, STOP_AHEAD_STILL_M, corners[slow], centers[slow], circumradius[slow]
+            )
         if hit is None:
             return new_s
         # Stop short: where the walk would have met the skid is remembered, to walk on
@@ -150,13 +171,14 @@ class PeopleReaction:
         """Gaps ``(M, R)`` of person ``k`` at route positions ``route_s`` ``(M,)`` to the
         skids within reach (``R`` may be 0)."""
         person, r = self.people[k], self.radius[k]
-        pts = np.stack([person.position_at(float(x)) for x in route_s])
+        m = len(route_s)
+        first = person.position_at(float(route_s[0]))
         span = float(np.abs(route_s[-1] - route_s[0]))
         reach = circumradius + r + span + TOUCH_TOLERANCE_M
-        near = np.flatnonzero(np.linalg.norm(centers - pts[0], axis=1) < reach)
-        m = len(pts)
+        near = np.flatnonzero(np.linalg.norm(centers - first, axis=1) < reach)
         if not len(near):
             return np.zeros((m, 0))
+        pts = np.stack([first] + [person.position_at(float(x)) for x in route_s[1:]])
         gap = rect_disc_gap(
             np.tile(corners[near], (m, 1, 1)),
             np.repeat(pts, len(near), axis=0),

@@ -237,7 +237,13 @@ class Simulator:
             return new_s
         centers = pivot_to_center(self.poses, self.center_offset)
         out = self.reaction.step(
-            self.person_s, new_s, self.dt, self.corners(), centers, self.circumradius
+            self.person_s,
+            new_s,
+            self.dt,
+            self.corners(),
+            centers,
+            self.circumradius,
+            self.vel[:, 0],
         )
         self.person_held = self.reaction.pace <= 0.0
         return out
