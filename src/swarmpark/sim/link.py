@@ -293,7 +293,6 @@ class SimLink:
                 ],
                 dtype=bool,
             )
-
             speed = np.array([p.speed_mps for p in sim.people])
             dirn = ahead - ppos
             norm = np.linalg.norm(dirn, axis=1, keepdims=True)

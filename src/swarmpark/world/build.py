@@ -46,8 +46,7 @@ class RobotConfig:
 class Person:
     """A moving obstacle: a disc walking a polyline at constant speed from ``start_s``,
     standing ``waits_s[i]`` seconds at waypoint ``i`` when given. A person who ``reacts``
-    stops short of a skid in the way (the simulator holds their walk, see
-    :meth:`swarmpark.sim.simulator.Simulator.step`).
+    stops short of a skid in the way, waits and may back off (:mod:`swarmpark.sim.people`).
 
     The walked distance ``s`` counts a wait as ``speed * wait`` metres spent in place, so the
     simulator advances every person the same way whether it walks or stands.
