@@ -139,3 +139,32 @@ def test_a_skid_driving_off_is_not_held_by_a_person_walking_after_it():
 def test_reacts_must_be_true_or_false():
     with pytest.raises(ScenarioError, match=r"obstacles\[0\].*reacts"):
         make_world(obstacles=[{"waypoints": [[1, 1], [3, 1]], "reacts": "sometimes"}])
+
+
+@pytest.mark.parametrize("reacts", [False, True])
+def test_a_run_counts_a_person_walking_into_a_parked_skid_apart_from_the_fleets_contacts(reacts):
+    from swarmpark.apps.run import run_world
+
+    # Walls 0.1 m off both ends of the skid: it cannot step aside along its axis.
+    ends = [[[4.2, 1.5], [4.3, 1.5], [4.3, 3.0], [4.2, 3.0]]]
+    ends += [[[5.7, 1.5], [5.8, 1.5], [5.8, 3.0], [5.7, 3.0]]]
+    world = make_world(
+        duration_s=12,
+        map={"size_m": [10, 12], "resolution_m": 0.05, "walls": ends},
+        robots=[{"id": "a", "pose": [5.0, 3.0, 0.0]}],
+        obstacles=[
+            {
+                "radius_m": 0.3,
+                "waypoints": [[5.0, 6.5], [5.0, 0.5]],
+                "speed_mps": 1.0,
+                "reacts": reacts,
+            }
+        ],
+        commands=[{"at_s": 0, "goto": {"robot": "a", "pose": [5.0, 3.0, 0.0]}}],
+    )
+    r = run_world(world).result
+    kinds = [c["kind"] for c in r["collisions"]]
+    # Walked into by a person who does not react: reported, and the skid still parked with
+    # no contact of the fleet's (success). A reacting person stops short: no contact at all.
+    assert kinds == (["person-robot"] if not reacts else [])
+    assert r["success"]
