@@ -67,7 +67,7 @@ def _detect(poses_est, var, ranges, cfg=None):
     )  # fmt: skip
 
 
-def test_a_neighbour_is_detected_where_its_estimate_is_and_weighed_by_its_certainty():
+def test_a_neighbour_is_detected_where_its_estimate_is_and_only_if_it_is_more_certain():
     truth = np.array([[10.0, 7.0, 0.0], [12.5, 7.0, 0.0]])
     ranges = _scans(truth, prepare_grid(_deck()), np.random.default_rng(0))[0]
     lm = _detect(truth, np.array([1e-3, 1e-4]), ranges)
@@ -79,12 +79,19 @@ def test_a_neighbour_is_detected_where_its_estimate_is_and_weighed_by_its_certai
     assert lm.weight.sum() == pytest.approx(
         len(lm.beams) / (1 + len(lm.beams) * 1e-4 / CoopConfig().sigma_m ** 2)
     )
-    # A less sure neighbour counts with its variance doubled (it may be using skid 0 too) ...
-    less = _detect(truth, np.array([1e-4, 1e-3]), ranges)
+    # A less sure neighbour is not used (it may be using skid 0: the evidence would count
+    # twice) ...
+    assert _detect(truth, np.array([1e-4, 1e-3]), ranges) is None
+    # ... unless asked for, with its variance doubled (covariance intersection) ...
+    mutual = CoopConfig(mutual_inflation=2.0)
+    less = _detect(truth, np.array([1e-4, 1e-3]), ranges, mutual)
     k = len(less.beams)
     assert less.weight.sum() == pytest.approx(k / (1 + k * 2e-3 / CoopConfig().sigma_m ** 2))
-    # ... or not at all without the mutual use (the first round's rule).
-    assert _detect(truth, np.array([1e-4, 1e-3]), ranges, CoopConfig(mutual_inflation=None)) is None
+    # ... and then only by a skid that sees no mapped structure (the west wall, 3.7 m away).
+    near = truth - [6.0, 0.0, 0.0]
+    near_ranges = _scans(near, prepare_grid(_deck()), np.random.default_rng(0))[0]
+    assert _detect(near, np.array([1e-3, 1e-4]), near_ranges, mutual) is not None
+    assert _detect(near, np.array([1e-4, 1e-3]), near_ranges, mutual) is None
     # An estimate 2 m off the returns: nothing there is the neighbour (no truth is used).
     wrong = truth.copy()
     wrong[1, 1] += 2.0
