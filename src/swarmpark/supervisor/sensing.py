@@ -168,8 +168,10 @@ class OnboardSensing:
         seen = ranges if others is None else np.where(others, np.nan, ranges)
         self.costmap.update(t, self.estimates, seen)
         rows = np.flatnonzero(~np.all(np.isnan(ranges), axis=1))
-        self.last_scans[rows] = seen[rows]
-        self.last_scan_poses[rows] = self.estimates[rows]
+        # New arrays, not in place: a server lays a park out off the sim thread.
+        scans, poses = self.last_scans.copy(), self.last_scan_poses.copy()
+        scans[rows], poses[rows] = seen[rows], self.estimates[rows]
+        self.last_scans, self.last_scan_poses = scans, poses
         cells = self.fleet_layer.merge(t)
         self.detected_cells = cells
         grid = self._base_grid
