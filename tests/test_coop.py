@@ -53,15 +53,17 @@ def test_compose_odometry_carries_an_estimate_by_the_body_frame_increment():
 def test_config_rejects_bad_values_by_name():
     with pytest.raises(ValueError, match="coop.sigma_m"):
         CoopConfig(sigma_m=0.0)
+    with pytest.raises(ValueError, match="coop.mutual_inflation"):
+        CoopConfig(mutual_inflation=0.5)
     with pytest.raises(ValueError, match="min_returns"):
         CoopConfig(min_returns=5, max_returns=2)
 
 
-def _detect(poses_est, var, ranges):
+def _detect(poses_est, var, ranges, cfg=None):
     return neighbour_beams(
         0, ranges, beam_angles(SPEC), (0.0, 0.0), SPEC.max_range_m, poses_est, var,
         np.full(len(poses_est), FP.center_offset_m), np.tile([0.6, 0.4], (len(poses_est), 1)),
-        LikelihoodField(_deck()).distance, CoopConfig(),
+        LikelihoodField(_deck()).distance, cfg or CoopConfig(),
     )  # fmt: skip
 
 
@@ -77,7 +79,19 @@ def test_a_neighbour_is_detected_where_its_estimate_is_and_only_if_it_is_more_ce
     assert lm.weight.sum() == pytest.approx(
         len(lm.beams) / (1 + len(lm.beams) * 1e-4 / CoopConfig().sigma_m ** 2)
     )
-    assert _detect(truth, np.array([1e-4, 1e-3]), ranges) is None  # the neighbour is less sure
+    # A less sure neighbour is not used (it may be using skid 0: the evidence would count
+    # twice) ...
+    assert _detect(truth, np.array([1e-4, 1e-3]), ranges) is None
+    # ... unless asked for, with its variance doubled (covariance intersection) ...
+    mutual = CoopConfig(mutual_inflation=2.0)
+    less = _detect(truth, np.array([1e-4, 1e-3]), ranges, mutual)
+    k = len(less.beams)
+    assert less.weight.sum() == pytest.approx(k / (1 + k * 2e-3 / CoopConfig().sigma_m ** 2))
+    # ... and then only by a skid that sees no mapped structure (the west wall, 3.7 m away).
+    near = truth - [6.0, 0.0, 0.0]
+    near_ranges = _scans(near, prepare_grid(_deck()), np.random.default_rng(0))[0]
+    assert _detect(near, np.array([1e-3, 1e-4]), near_ranges, mutual) is not None
+    assert _detect(near, np.array([1e-4, 1e-3]), near_ranges, mutual) is None
     # An estimate 2 m off the returns: nothing there is the neighbour (no truth is used).
     wrong = truth.copy()
     wrong[1, 1] += 2.0

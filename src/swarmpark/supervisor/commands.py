@@ -16,13 +16,14 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 from shapely.geometry import Point, Polygon
-from shapely.ops import nearest_points, unary_union
+from shapely.ops import nearest_points
 
 from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 from swarmpark.plan.spot_reach import as_report, spot_reach
+from swarmpark.supervisor.known_map import KnownMap, OperatorMap, SensedMap
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
 
@@ -82,6 +83,12 @@ class ParkGroup:
     #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
     blocks: tuple[tuple[int, ...], ...] = ()
     switches: int = 0
+    #: The park command that made it (to lay it out again, :mod:`.spot_watch`).
+    command: ParkCmd | None = None
+    #: Times it was laid out again because a spot was found blocked, and the consecutive
+    #: checks that found one blocked (:mod:`.spot_watch`).
+    relayouts: int = 0
+    blocked_checks: int = 0
 
 
 class CommandsMixin:
@@ -158,15 +165,18 @@ class CommandsMixin:
         )
         return idx, boundary, lay
 
+    @property
+    def park_map(self) -> KnownMap:
+        """What a park command is laid out, assigned and checked on
+        (:mod:`swarmpark.supervisor.known_map`): with onboard sensing the prior map and the
+        fleet's detections, else the scenario's map and obstacles."""
+        if self.sensing is not None:
+            return SensedMap(self.world, self.sensing)
+        return OperatorMap(self.world)
+
     def _known_solids(self, region: Polygon):
-        """Walls and static obstacles the operator knows of, within ``region``."""
-        parts = [p for p in self.world.wall_polygons if p.intersects(region)]
-        if not self.world.wall_polygons:
-            geom = self.world.grid.occupied_geometry(region)
-            if not geom.is_empty:
-                parts.append(geom)
-        parts += [p for p in self.world.static_obstacles if p.intersects(region)]
-        return unary_union(parts) if parts else None
+        """Walls and obstacles the operator knows of, within ``region`` (:attr:`park_map`)."""
+        return self.park_map.solids(region)
 
     def park(self, cmd: ParkCmd) -> Outcome:
         """Lay out goals in the boundary and assign them to the robots (all or nothing).
@@ -207,6 +217,7 @@ class CommandsMixin:
             report,
             goal_dims=tuple((f.length_m, f.width_m) for f in fps),
             blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
+            command=cmd,
         )
         bound_inputs = (
             self.world.grid,
@@ -238,7 +249,7 @@ class CommandsMixin:
     def _spot_check(self, goals: np.ndarray, fps, order):
         """The manoeuvre check of a layout's spots on the map as it is now, to run now or
         later (:func:`swarmpark.plan.spot_reach.spot_reach`)."""
-        grid = self.world.grid
+        grid = self.park_map.grid()
         return partial(
             spot_reach, grid.occupied, grid.origin, grid.resolution_m, goals, list(fps), order
         )
@@ -286,7 +297,7 @@ class CommandsMixin:
         from swarmpark.plan.grid import build_costmap, path_length_matrix
 
         widths = [self.info.footprints[i].width_m for i in idx]
-        cm = build_costmap(self.world.grid, min(widths) / 2, min(widths) / 2)
+        cm = build_costmap(self.park_map.grid(), min(widths) / 2, min(widths) / 2)
         return path_length_matrix(cm, self.poses_known[idx, :2], goals[:, :2])
 
     def goto(self, cmd: GotoCmd) -> Outcome:

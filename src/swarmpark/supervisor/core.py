@@ -35,6 +35,7 @@ from swarmpark.supervisor import fill_order, reports
 from swarmpark.supervisor.commands import FORMATION_GRACE_S, CommandsMixin, Outcome, ParkGroup
 from swarmpark.supervisor.health import Health, HealthParams
 from swarmpark.supervisor.sensing import OnboardSensing
+from swarmpark.supervisor.spot_watch import SpotWatch
 from swarmpark.world.scenario import World
 
 __all__ = ["Supervisor", "Outcome", "ParkGroup", "ROBOT_STATES", "TELEOP_TIMEOUT_S"]
@@ -126,6 +127,7 @@ class Supervisor(CommandsMixin):
             raise ValueError("sensing.kidnap: needs a link that can carry robots (the simulator)")
         if world.scenario.sensing.localization == "amcl":
             self.sensing = OnboardSensing(world, self.info, self.inbox, self._base_grid)
+        self.spot_watch = SpotWatch()
         #: Robots lost (stale odometry) or not following their commands (:mod:`.health`).
         self.health = Health(self.ids, self.info, health)
         self.health.heartbeat(self.t, self.inbox.odom_stamp)
@@ -398,10 +400,29 @@ class Supervisor(CommandsMixin):
             getattr(self.controller, "paths", None),
             half_widths,
         )
+        self._watch_spots()
         if self.sim is not None:  # a report on the run, not an input to it
             est, truth = self.sensing.estimates, self.sim.poses
             self.loc_errors.append(np.hypot(est[:, 0] - truth[:, 0], est[:, 1] - truth[:, 1]))
             self.loc_times.append(self.t)
+
+    def _watch_spots(self) -> None:
+        """Lay a parking group out again when the scans show something on one of its spots
+        (:mod:`.spot_watch`): an obstacle the map lacks that no scan had seen at the park."""
+        if not self.groups:
+            return
+        sensing = self.sensing
+        cells = sensing.detected_cells
+        pts = self._base_grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
+        for g in self.spot_watch.due(
+            self.t, self.groups, self._corners_body, pts, sensing.people.xy
+        ):
+            # The skids the group has now (the operator may have taken some elsewhere since).
+            cmd = g.command.model_copy(update={"robots": [self.ids[i] for i in g.robots]})
+            out = self.apply_park(self.prepare_park(cmd, check_reach=False))
+            new = self.groups[-1] if out.accepted else g
+            new.relayouts = g.relayouts + 1
+            new.blocked_checks = 0
 
     def settled(self) -> bool:
         """Every commanded robot is at its goal and at rest, and nothing else is pending."""

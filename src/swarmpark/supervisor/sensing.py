@@ -109,6 +109,13 @@ class OnboardSensing:
         pieces, owners = world.static_convex_pieces()
         self._wall_pieces = pieces[np.array([o == "wall" for o in owners])]
         self._detected_squares = np.zeros((0, 2), dtype=np.int64)
+        #: ``(M, 2)`` (row, col) cells of ``base_grid`` in the fleet's obstacle layer after the
+        #: last scans (what the park layout adds to the prior map, supervisor/known_map.py).
+        self.detected_cells = np.zeros((0, 2), dtype=np.int64)
+        #: Each skid's last scan (returns off other skids masked, ``nan``) and the pose it
+        #: believed it took it at: what lies behind the detections (sense/shadow.py).
+        self.last_scans = np.full((self.n, self.lidar_spec.num_beams), np.nan)
+        self.last_scan_poses = self.estimates.copy()
         self.static_view = self._wall_pieces  # walls and detected squares, for the view
         from swarmpark.sense.tracking import PeopleTracker
 
@@ -160,7 +167,13 @@ class OnboardSensing:
         others = self.localizer.other_skid_beams(ranges)
         seen = ranges if others is None else np.where(others, np.nan, ranges)
         self.costmap.update(t, self.estimates, seen)
+        rows = np.flatnonzero(~np.all(np.isnan(ranges), axis=1))
+        # New arrays, not in place: a server lays a park out off the sim thread.
+        scans, poses = self.last_scans.copy(), self.last_scan_poses.copy()
+        scans[rows], poses[rows] = seen[rows], self.estimates[rows]
+        self.last_scans, self.last_scan_poses = scans, poses
         cells = self.fleet_layer.merge(t)
+        self.detected_cells = cells
         grid = self._base_grid
         pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
         self._track_people(t, self.costmap.unexplained_points(self.estimates, seen), pts)
@@ -199,6 +212,19 @@ class OnboardSensing:
                         grid.cell_to_world(np.argwhere(appeared)), has_goal, paths(), half_widths
                     )
         return replan
+
+    def shadowed_mask(self) -> np.ndarray:
+        """``(H, W)`` bool cells of the planner's base map behind what the skids' last scans
+        detected that none of them saw free (:func:`swarmpark.sense.shadow.shadowed_cells`)."""
+        from swarmpark.sense.shadow import shadowed_cells
+
+        return shadowed_cells(
+            self._base_grid,
+            self.lidar_spec,
+            self.last_scan_poses,
+            self.last_scans,
+            map_tolerance_m=self.costmap.config.map_tolerance_m,
+        )
 
     def _track_people(self, t: float, points: np.ndarray, detected: np.ndarray) -> None:
         """Feed the fleet's people tracker (:mod:`swarmpark.sense.tracking`) with the points
