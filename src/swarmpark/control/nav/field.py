@@ -48,6 +48,8 @@ class PotentialField:
         self.params = params
         self.dynamic = dynamic
         self._outline = None  # the SkidOutlines the per-skid point ranges below are for
+        self._fps = None  # the footprints the action points below are for
+        self._points: tuple = ()
 
     def drive(
         self,
@@ -64,10 +66,8 @@ class PotentialField:
         (``final``) and within ``near_m`` of the goal only obstacles within
         ``influence_at_goal_m`` repel (parked neighbours sit just beyond)."""
         p = self.params
-        fps = view.footprints
-        x_front = np.array([fps[i].length_m - fps[i].pivot for i in idx])
-        x_rear = -np.array([fps[i].pivot for i in idx])
-        half_w = np.array([fps[i].width_m / 2 for i in idx])
+        front, rear, half = self._action_points(view.footprints)
+        x_front, x_rear, half_w = front[idx], rear[idx], half[idx]
         poses = view.poses[idx]
         # Attraction, weighted by the distance still to go (core.progress) to the goal.
         dist_goal = np.linalg.norm(view.goals[idx, :2] - poses[:, :2], axis=1)
@@ -89,6 +89,18 @@ class PotentialField:
         raw[:, 0] = np.clip(raw[:, 0], -view.max_speed[idx], view.max_speed[idx])
         raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
         return raw, dist_goal
+
+    def _action_points(self, fps) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Body-x of every skid's front and rear action points and its half width ``(N,)``,
+        kept while the footprints stay the same."""
+        if fps is not self._fps and fps != self._fps:
+            self._points = (
+                np.array([f.length_m - f.pivot for f in fps]),
+                -np.array([f.pivot for f in fps]),
+                np.array([f.width_m / 2 for f in fps]),
+            )
+        self._fps = fps
+        return self._points
 
     def repulsion(self, view, idx, scene: Scene, x_front, x_rear, half_w, influence):
         """Summed body-frame repulsion on the front and rear action points of robots ``idx``."""

@@ -12,13 +12,13 @@ import shapely
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
+from swarmpark.control.nav.kernels import rollout_poses
 from swarmpark.control.nav.params import MonitorParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import (
     TOUCH_TOLERANCE_M,
     convex_overlap,
     footprint_corners,
-    integrate_unicycle,
     rect_disc_gap,
 )
 
@@ -50,21 +50,23 @@ def rollout(
     (:func:`~swarmpark.core.geometry.integrate_unicycle`)."""
     n_sub = max(1, int(round(times[-1] / view.dt)))
     sub_dt = times[-1] / n_sub
-    record = np.clip(np.round(times / sub_dt), 1, n_sub).astype(int)
-    v, w = view.vel[rows, 0], view.vel[rows, 1]
-    dv = view.max_accel[rows] * sub_dt
-    dw = np.inf if view.max_yaw_accel is None else view.max_yaw_accel[rows] * sub_dt
-    now = view.poses[rows]
-    pose = np.empty((len(rows), len(times), 3))
-    # np.clip's values by np.minimum(np.maximum(...)) (np.clip costs more per call than both).
-    for step in range(1, n_sub + 1):
-        v = v + np.minimum(np.maximum(v_cmd - v, -dv), dv)
-        w = w + np.minimum(np.maximum(w_cmd - w, -dw), dw)
-        now = integrate_unicycle(now, v, w, sub_dt)
-        at = np.flatnonzero(record == step)
-        if len(at):
-            pose[:, at] = now[:, None]
-    return pose
+    record = np.clip(np.round(times / sub_dt), 1, n_sub).astype(np.int64)
+    n = len(rows)
+    dv = np.broadcast_to(view.max_accel[rows] * sub_dt, (n,))
+    dw = np.full(n, np.inf) if view.max_yaw_accel is None else view.max_yaw_accel[rows] * sub_dt
+    # Compiled (kernels.rollout_poses): the same arithmetic as one numpy call per sub-step.
+    return rollout_poses(
+        np.ascontiguousarray(view.poses[rows], dtype=float),
+        np.ascontiguousarray(view.vel[rows, 0], dtype=float),
+        np.ascontiguousarray(view.vel[rows, 1], dtype=float),
+        np.ascontiguousarray(np.broadcast_to(v_cmd, (n,)), dtype=float),
+        np.ascontiguousarray(np.broadcast_to(w_cmd, (n,)), dtype=float),
+        np.ascontiguousarray(dv, dtype=float),
+        np.ascontiguousarray(np.broadcast_to(dw, (n,)), dtype=float),
+        float(sub_dt),
+        n_sub,
+        record,
+    )
 
 
 @dataclass(frozen=True)
