@@ -93,6 +93,7 @@ class CollisionMonitor:
         p = params
         self.scales = np.asarray(p.scales)
         self.times = np.linspace(p.horizon_s / p.samples, p.horizon_s, p.samples)
+        self._fps, self._fps_reach = None, 0.0
 
     def check(
         self,
@@ -266,6 +267,12 @@ class CollisionMonitor:
             out[ia[hit]] = True
         return out
 
+    def _max_circumradius(self, fps) -> float:
+        """The largest circumradius of footprints ``fps``, kept while they stay the same."""
+        if fps is not self._fps:
+            self._fps, self._fps_reach = fps, max(f.circumradius_m for f in fps)
+        return self._fps_reach
+
     def joint_check(
         self, view: ControlView, idx: np.ndarray, out: np.ndarray, body: np.ndarray
     ) -> None:
@@ -279,7 +286,7 @@ class CollisionMonitor:
         """
         times = self.times
         T = len(times)
-        reach = max(f.circumradius_m for f in view.footprints) * 2.0
+        reach = self._max_circumradius(view.footprints) * 2.0
         # Two skids closing at their current speed plus their top speed over the horizon.
         speed = np.abs(view.vel[idx, 0]).max(initial=0.0) + view.max_speed[idx].max()
         pairs = cKDTree(view.poses[idx, :2]).query_pairs(

@@ -285,8 +285,17 @@ class DeadlockState:
     episode: dict | None = None
     rungs: tuple[Rung, ...] = field(default_factory=lambda: tuple(cls() for cls in RUNGS))
 
+    def __post_init__(self) -> None:
+        # The first rung of each kind, looked up once (the rungs are a fixed tuple).
+        self._rung_of: dict[type, Rung] = {}
+        for cls in RUNGS:
+            found = [r for r in self.rungs if isinstance(r, cls)]
+            if found:
+                self._rung_of[cls] = found[0]
+
     def rung(self, cls: type[Rung]) -> Rung:
-        return next(r for r in self.rungs if isinstance(r, cls))
+        r = self._rung_of.get(cls)
+        return r if r is not None else next(r for r in self.rungs if isinstance(r, cls))
 
     @property
     def back_out(self) -> BackOut:
