@@ -156,6 +156,10 @@ class PotentialField:
                 cKDTree(here), float(r.max() + self._rad.max()), output_type="ndarray"
             )
             sk, rb = near["i"].astype(int), near["j"].astype(int)
+            # By robot row, then skid: each skid's points are one ascending run, and the
+            # runs ascend with the skid, so the pairs come out sorted by (row, point).
+            by_row = np.lexsort((sk, rb))
+            sk, rb = sk[by_row], rb[by_row]
             cnt = self._counts[sk]
             rob = np.repeat(rb, cnt)
             first = np.repeat(self._starts[sk] - np.cumsum(cnt) + cnt, cnt)
@@ -170,6 +174,8 @@ class PotentialField:
         d = dyn[pt] - here[rob]
         keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= r[rob] * r[rob]
         rob, pt = rob[keep], pt[keep]
+        if n_pts and len(dyn) == n_pts:
+            return rob, pt  # skids only: already in (row, point) order
         order = np.lexsort((pt, rob))
         return rob[order], pt[order]
 

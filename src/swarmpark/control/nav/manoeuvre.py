@@ -88,14 +88,15 @@ class ManoeuvrePlanner:
             NAV_HEADING_LEVER_M,
         )
         roamed = self._roamed(pose, [states[i] for i in idx.tolist()])
-        for k, i in enumerate(idx.tolist()):
+        t = view.t
+        for k, (i, ok) in enumerate(zip(idx.tolist(), np.asarray(eligible).tolist(), strict=True)):
             st = states[i]
-            if st.running() and (
-                not eligible[k] or st.goal is None or np.any(st.goal != view.goals[i])
+            if st.segments is not None and (  # running
+                not ok or st.goal is None or np.any(st.goal != view.goals[i])
             ):
-                st.stop(view.t, 0.0)
-            if not eligible[k]:
-                st.best_left_m, st.best_t = np.inf, view.t
+                st.stop(t, 0.0)
+            if not ok:
+                st.best_left_m, st.best_t = np.inf, t
                 continue
             # Progress, or travel: a skid driving round an obstacle away from its goal is
             # not stuck, one loitering within roam_m of where it last got closer is.
@@ -132,7 +133,7 @@ class ManoeuvrePlanner:
         p = self.params
         for k, i in enumerate(idx.tolist()):
             st = states[i]
-            if not st.running():
+            if st.segments is None:  # not running
                 continue
             held = np.any(np.abs(raw[k]) > 1e-6) and np.all(np.abs(safe[k]) < 1e-6)
             st.blocked_s = st.blocked_s + view.dt if held else 0.0
