@@ -208,3 +208,33 @@ def test_the_sim_link_reports_each_robot_once_per_step_in_one_batch():
     assert np.array_equal(sup.inbox.odom, sup.sim.poses)
     assert np.array_equal(sup.inbox.pose, sup.sim.poses)
     assert np.all(sup.inbox.odom_stamp == sup.t) and sup.inbox.ignored == 0
+
+
+def test_keep_right_facing_pairs_equal_the_per_skid_products():
+    from scipy.spatial import cKDTree
+
+    from swarmpark.control.nav.avoidance import _facing
+
+    rng = np.random.default_rng(5)
+    n = 300
+    centres = np.round(rng.uniform(0, 30, (n, 2)), 1)  # on a grid: exact zeros happen
+    u_pref = rng.normal(size=(n, 2))
+    u_pref[::4] = np.round(u_pref[::4])  # axis-aligned velocities, some zero
+    u_pref[::9] = 0.0
+    cruising = np.arange(0, n, 2)
+    others = np.arange(n)
+    near = cKDTree(centres[others]).query_ball_point(centres[cruising], 3.0)
+    lens = np.array([len(c) for c in near])
+    kk = np.repeat(np.arange(len(cruising)), lens)
+    j = others[np.concatenate([np.asarray(c, int) for c in near])]
+    i = cruising[kk]
+    kk, i, j = kk[j != i], i[j != i], j[j != i]
+    ahead, oncoming = _facing(centres, u_pref, kk, i, j, cruising, others, near)
+    want_a, want_o = [], []
+    for ic, cand in zip(cruising, near, strict=True):  # the loop it replaces
+        jk = others[cand]
+        jk = jk[jk != ic]
+        want_a += ((centres[jk] - centres[ic]) @ u_pref[ic] > 0).tolist()
+        want_o += (u_pref[jk] @ u_pref[ic] < 0).tolist()
+    assert ahead.tolist() == want_a and oncoming.tolist() == want_o
+    assert ahead.any() and oncoming.any() and not ahead.all()

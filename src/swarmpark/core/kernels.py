@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["convex_overlap_pairs", "convex_distance_pairs"]
+__all__ = ["convex_overlap_pairs", "convex_distance_pairs", "overlap_one"]
 
 
 @njit(cache=True)
@@ -38,6 +38,30 @@ def _unit_normals(p, out, off):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def overlap_one(a, b, axes):  # pragma: no cover - compiled
+    """Penetration depth of convex polygons ``a`` ``(K, 2)`` and ``b`` ``(L, 2)`` (``axes``:
+    scratch ``(K + L, 2)``), as one row of ``geometry.convex_overlap``."""
+    K, L = a.shape[0], b.shape[0]
+    _unit_normals(a, axes, 0)
+    _unit_normals(b, axes, K)
+    best = np.inf
+    for i in range(K + L):
+        ax, ay = axes[i, 0], axes[i, 1]
+        amin, amax = np.inf, -np.inf
+        for k in range(K):
+            v = ax * a[k, 0] + ay * a[k, 1]
+            amin = min(amin, v)
+            amax = max(amax, v)
+        bmin, bmax = np.inf, -np.inf
+        for k in range(L):
+            v = ax * b[k, 0] + ay * b[k, 1]
+            bmin = min(bmin, v)
+            bmax = max(bmax, v)
+        best = min(best, min(amax, bmax) - max(amin, bmin))
+    return best
+
+
+@njit(cache=True)
 def convex_overlap_pairs(a, b):  # pragma: no cover - compiled
     """Penetration depth ``(M,)`` of convex polygon pairs ``a`` ``(M, K, 2)`` and ``b``
     ``(M, L, 2)`` by the separating-axis theorem (see ``geometry.convex_overlap``)."""
@@ -45,24 +69,7 @@ def convex_overlap_pairs(a, b):  # pragma: no cover - compiled
     out = np.empty(M)
     axes = np.empty((K + L, 2))
     for m in range(M):
-        _unit_normals(a[m], axes, 0)
-        _unit_normals(b[m], axes, K)
-        best = np.inf
-        for i in range(K + L):
-            ax, ay = axes[i, 0], axes[i, 1]
-            amin, amax = np.inf, -np.inf
-            for k in range(K):
-                v = ax * a[m, k, 0] + ay * a[m, k, 1]
-                amin = min(amin, v)
-                amax = max(amax, v)
-            bmin, bmax = np.inf, -np.inf
-            for k in range(L):
-                v = ax * b[m, k, 0] + ay * b[m, k, 1]
-                bmin = min(bmin, v)
-                bmax = max(bmax, v)
-            ov = min(amax, bmax) - max(amin, bmin)
-            best = min(best, ov)
-        out[m] = best
+        out[m] = overlap_one(a[m], b[m], axes)
     return out
 
 

@@ -14,7 +14,9 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["rollout_poses"]
+from swarmpark.core.kernels import overlap_one
+
+__all__ = ["rollout_poses", "hits_against_skids"]
 
 #: Yaw rates below this are integrated as straight lines (as ``core.geometry``).
 _STRAIGHT_EPS = 1e-9
@@ -60,3 +62,29 @@ def rollout_poses(poses, v, w, v_cmd, w_cmd, dv, dw, sub_dt, n_sub, record):  # 
                     out[r, k, 1] = y
                     out[r, k, 2] = th
     return out
+
+
+@njit(cache=True)
+def hits_against_skids(ra, rb, centres, other_c, corners, others, radius, group, tol, bad):
+    # pragma: no cover - compiled
+    """For candidate pairs (rollout ``ra[p]``, skid ``rb[p]``): each of the rollout's ``group``
+    footprints (``corners[ra * group:]``, centres ``centres``) whose centre is within
+    ``radius`` of the skid's (``other_c``) and that overlaps it (``others``) by more than
+    ``tol`` is marked in ``bad``; returns the footprint and skid of every hit, in pair order
+    (the monitor's ``_hits_skids`` test, footprint by footprint)."""
+    hit_q = np.empty(len(ra) * group, np.int64)
+    hit_b = np.empty(len(ra) * group, np.int64)
+    axes = np.empty((corners.shape[1] + others.shape[1], 2))
+    n = 0
+    for p in range(len(ra)):
+        b = rb[p]
+        for q in range(ra[p] * group, (ra[p] + 1) * group):
+            dx = centres[q, 0] - other_c[b, 0]
+            dy = centres[q, 1] - other_c[b, 1]
+            if math.sqrt(dx * dx + dy * dy) <= radius:
+                if overlap_one(corners[q], others[b], axes) > tol:
+                    bad[q] = True
+                    hit_q[n] = q
+                    hit_b[n] = b
+                    n += 1
+    return hit_q[:n], hit_b[:n]

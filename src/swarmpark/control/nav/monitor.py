@@ -12,7 +12,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
-from swarmpark.control.nav.kernels import rollout_poses
+from swarmpark.control.nav.kernels import hits_against_skids, rollout_poses
 from swarmpark.control.nav.params import MonitorParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import (
@@ -210,16 +210,22 @@ class CollisionMonitor:
         ra = np.repeat(np.arange(len(idx)), lens)
         keep = rb != idx[ra]
         ra, rb = ra[keep], rb[keep]
-        qa = (ra[:, None] * (S * T) + np.arange(S * T)).ravel()
-        qb = np.repeat(rb, S * T)
-        near = np.linalg.norm(centres[qa] - other_c[qb], axis=1) <= radius
-        qa, qb = qa[near], qb[near]
-        if len(qa):
-            hit = convex_overlap(corners[qa], others[qb]) > TOUCH_TOLERANCE_M
-            bad[qa[hit]] = True
-            full_speed = (qa // T) % S == 0
-            for a, b in zip(owner[qa[hit & full_speed]], qb[hit & full_speed], strict=True):
-                blockers[a].add(int(b))
+        # Each footprint against each candidate skid (compiled: kernels.hits_against_skids).
+        qa, qb = hits_against_skids(
+            ra.astype(np.int64),
+            rb.astype(np.int64),
+            np.ascontiguousarray(centres),
+            np.ascontiguousarray(other_c),
+            np.ascontiguousarray(corners, dtype=float),
+            np.ascontiguousarray(others, dtype=float),
+            float(radius),
+            S * T,
+            TOUCH_TOLERANCE_M,
+            bad,
+        )
+        full_speed = (qa // T) % S == 0
+        for a, b in zip(owner[qa[full_speed]].tolist(), qb[full_speed].tolist(), strict=True):
+            blockers[a].add(b)
         return blockers
 
     def _hits_people(self, view: ControlView, corners, n_act: int, bad: np.ndarray) -> None:
