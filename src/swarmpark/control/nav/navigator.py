@@ -301,8 +301,10 @@ class Navigator:
         self.making_room = room.aside
         for i in np.flatnonzero(room.undock):
             robots[i].dock.docked = False  # dock again precisely once the way is clear
-        bump = self.ladder.step(view, settled, self._states("deadlock"), self._states("stall"))
-        backing = np.array([r.deadlock.back_out.running() for r in robots], dtype=bool)
+        ladders = self._states("deadlock")
+        bump = self.ladder.step(view, settled, ladders, self._states("stall"))
+        backs = [d.back_out for d in ladders]
+        backing = np.array([b.running() for b in backs], dtype=bool)
         backing &= ~immobile
         res = self.avoidance.step(
             view,
@@ -317,10 +319,10 @@ class Navigator:
                 aside=room.aside,
                 bump=bump,
                 side_step=np.array(
-                    [robots[i].deadlock.side_step.running(view.t) for i in cruising], dtype=bool
+                    [ladders[i].side_step.running(view.t) for i in cruising.tolist()], dtype=bool
                 ),
                 backing=backing,
-                back_dir=np.array([r.deadlock.back_out.direction for r in robots]),
+                back_dir=np.array([b.direction for b in backs]),
             ),
         )
         for i in np.flatnonzero(self.avoidance.pushed(settled, res.along)):
