@@ -131,7 +131,9 @@ class CollisionMonitor:
         if straight:
             self._straight_on(view, idx, raw, out, ~safe.any(axis=1), body, scene, others, robots)
         slowed = first_safe > 0
-        blockers = [b if s else set() for b, s in zip(blockers, slowed, strict=True)]
+        for b, s in zip(blockers, slowed.tolist(), strict=True):
+            if b and not s:
+                b.clear()  # only a skid slowed down was held up by the others
         if joint and robots:
             self.joint_check(view, idx, out, body)
         return MonitorResult(out, blockers, slowed)

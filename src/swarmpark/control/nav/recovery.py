@@ -345,12 +345,15 @@ class DeadlockLadder:
         p = self.params
         bump = np.zeros(len(view.poses))
         remaining = self.remaining(view)
+        # Per-skid flags as Python bools, read once for all.
+        idle = (view.goal_changed | ~view.active | settled).tolist()
+        gone = (~view.active | settled).tolist()
         for i in range(len(view.poses)):
             st = states[i]
-            if view.goal_changed[i] or not view.active[i] or settled[i]:
+            if idle[i]:
                 st.best_remaining, st.best_t = remaining[i], view.t
                 st.stop()
-                if st.episode is not None and (not view.active[i] or settled[i]):
+                if st.episode is not None and gone[i]:
                     self._close(st, view.t)
                 continue
             if made_progress(remaining[i], st.best_remaining, p.progress_m):
