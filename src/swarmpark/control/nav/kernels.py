@@ -16,7 +16,7 @@ from numba import njit
 
 from swarmpark.core.kernels import overlap_one
 
-__all__ = ["rollout_poses", "hits_against_skids"]
+__all__ = ["rollout_poses", "hits_against_skids", "pairs_touching"]
 
 #: Yaw rates below this are integrated as straight lines (as ``core.geometry``).
 _STRAIGHT_EPS = 1e-9
@@ -88,3 +88,20 @@ def hits_against_skids(ra, rb, centres, other_c, corners, others, radius, group,
                     hit_b[n] = b
                     n += 1
     return hit_q[:n], hit_b[:n]
+
+
+@njit(cache=True)
+def pairs_touching(pairs, corners, tol):  # pragma: no cover - compiled
+    """Whether each pair ``(a, b)`` of ``pairs`` ``(P, 2)`` overlaps by more than ``tol`` at
+    any of the times of ``corners`` ``(n, T, 4, 2)`` (each skid's footprint per time), as the
+    monitor's joint check tests them (stopping at a pair's first hit)."""
+    T = corners.shape[1]
+    out = np.zeros(len(pairs), np.bool_)
+    axes = np.empty((corners.shape[2] * 2, 2))
+    for p in range(len(pairs)):
+        a, b = pairs[p, 0], pairs[p, 1]
+        for t in range(T):
+            if overlap_one(corners[a, t], corners[b, t], axes) > tol:
+                out[p] = True
+                break
+    return out

@@ -12,7 +12,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
-from swarmpark.control.nav.kernels import hits_against_skids, rollout_poses
+from swarmpark.control.nav.kernels import hits_against_skids, pairs_touching, rollout_poses
 from swarmpark.control.nav.params import MonitorParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import (
@@ -303,12 +303,9 @@ class CollisionMonitor:
         while len(pairs):
             pose = rollout(view, idx, out[:, 0], out[:, 1], times)
             corners = footprint_corners(pose.reshape(-1, 3), np.repeat(body, T, axis=0))
-            corners = corners.reshape(len(idx), T, 4, 2)
-            a = np.repeat(pairs[:, 0], T)
-            b = np.repeat(pairs[:, 1], T)
-            tk = np.tile(np.arange(T), len(pairs))
-            hit = convex_overlap(corners[a, tk], corners[b, tk]) > TOUCH_TOLERANCE_M
-            bad = np.unique(pairs[hit.reshape(len(pairs), T).any(axis=1)])
+            corners = np.ascontiguousarray(corners.reshape(len(idx), T, 4, 2), dtype=float)
+            hit = pairs_touching(pairs.astype(np.int64), corners, TOUCH_TOLERANCE_M)
+            bad = np.unique(pairs[hit])
             bad = bad[np.any(out[bad] != 0.0, axis=1)]
             if not len(bad):
                 return
