@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
 from swarmpark.control.nav.apf import attraction, forces_to_command, repulsion
+from swarmpark.control.nav.kernels import outline_pairs
 from swarmpark.control.nav.params import FieldParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import transform_points, wrap_angle
@@ -150,31 +151,38 @@ class PotentialField:
             self._rad = np.zeros(len(skids.reach))
             np.maximum.at(self._rad, skids.owner, np.hypot(*skids.points.T))
         here = view.poses[idx, :2]
+        r = np.asarray(r, dtype=float)
         rob_l, pt_l = [], []
         if n_pts and len(dyn) >= n_pts:
             near = cKDTree(view.poses[:, :2]).sparse_distance_matrix(
                 cKDTree(here), float(r.max() + self._rad.max()), output_type="ndarray"
             )
-            sk, rb = near["i"].astype(int), near["j"].astype(int)
+            sk, rb = near["i"].astype(np.int64), near["j"].astype(np.int64)
             # By robot row, then skid: each skid's points are one ascending run, and the
             # runs ascend with the skid, so the pairs come out sorted by (row, point).
             by_row = np.lexsort((sk, rb))
-            sk, rb = sk[by_row], rb[by_row]
-            cnt = self._counts[sk]
-            rob = np.repeat(rb, cnt)
-            first = np.repeat(self._starts[sk] - np.cumsum(cnt) + cnt, cnt)
-            pt = first + np.arange(len(rob))
+            # Compiled (kernels.outline_pairs): the points of those skids within reach.
+            rob, pt = outline_pairs(
+                rb[by_row],
+                sk[by_row],
+                self._starts.astype(np.int64),
+                self._counts.astype(np.int64),
+                np.ascontiguousarray(dyn[:n_pts], dtype=float),
+                np.ascontiguousarray(here, dtype=float),
+                r,
+            )
             rob_l.append(rob)
             pt_l.append(pt)
         if len(dyn) > n_pts:  # people: few, every pair
             rob, k = np.divmod(np.arange(len(idx) * (len(dyn) - n_pts)), len(dyn) - n_pts)
-            rob_l.append(rob)
-            pt_l.append(n_pts + k)
+            d = dyn[n_pts + k] - here[rob]
+            keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= r[rob] * r[rob]
+            rob_l.append(rob[keep])
+            pt_l.append(n_pts + k[keep])
+        if not rob_l:
+            return np.zeros(0, int), np.zeros(0, int)
         rob, pt = np.concatenate(rob_l), np.concatenate(pt_l)
-        d = dyn[pt] - here[rob]
-        keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= r[rob] * r[rob]
-        rob, pt = rob[keep], pt[keep]
-        if n_pts and len(dyn) == n_pts:
+        if len(rob_l) == 1 and len(dyn) == n_pts:
             return rob, pt  # skids only: already in (row, point) order
         order = np.lexsort((pt, rob))
         return rob[order], pt[order]

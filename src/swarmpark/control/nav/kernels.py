@@ -16,7 +16,7 @@ from numba import njit
 
 from swarmpark.core.kernels import overlap_one
 
-__all__ = ["rollout_poses", "hits_against_skids", "pairs_touching"]
+__all__ = ["rollout_poses", "hits_against_skids", "pairs_touching", "outline_pairs"]
 
 #: Yaw rates below this are integrated as straight lines (as ``core.geometry``).
 _STRAIGHT_EPS = 1e-9
@@ -105,3 +105,29 @@ def pairs_touching(pairs, corners, tol):  # pragma: no cover - compiled
                 out[p] = True
                 break
     return out
+
+
+@njit(cache=True)
+def outline_pairs(rb, sk, starts, counts, pts, here, r):  # pragma: no cover - compiled
+    """For each pair (robot row ``rb[p]``, skid ``sk[p]``), the skid's outline points
+    ``pts[starts[sk]:starts[sk] + counts[sk]]`` within ``r[rb]`` of ``here[rb]`` (squared
+    distances compared, as the field's numpy filter): their rows and point indices, pair by
+    pair and point by point."""
+    total = 0
+    for p in range(len(sk)):
+        total += counts[sk[p]]
+    rob = np.empty(total, np.int64)
+    pt = np.empty(total, np.int64)
+    n = 0
+    for p in range(len(rb)):
+        b, s = rb[p], sk[p]
+        hx, hy = here[b, 0], here[b, 1]
+        rr = r[b] * r[b]
+        for q in range(starts[s], starts[s] + counts[s]):
+            dx = pts[q, 0] - hx
+            dy = pts[q, 1] - hy
+            if dx * dx + dy * dy <= rr:
+                rob[n] = b
+                pt[n] = q
+                n += 1
+    return rob[:n], pt[:n]
