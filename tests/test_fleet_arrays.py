@@ -238,3 +238,22 @@ def test_keep_right_facing_pairs_equal_the_per_skid_products():
         want_o += (u_pref[jk] @ u_pref[ic] < 0).tolist()
     assert ahead.tolist() == want_a and oncoming.tolist() == want_o
     assert ahead.any() and oncoming.any() and not ahead.all()
+
+
+def test_envelope_pairs_are_the_search_tree_pairs():
+    import shapely
+
+    from swarmpark.core import geometry
+
+    rng = np.random.default_rng(7)
+    for n_tree in (5, geometry.BOX_SCAN_MAX + 50):
+        t_lo = np.round(rng.uniform(0, 20, (n_tree, 2)), 1)
+        t_hi = t_lo + np.round(rng.uniform(0, 3, (n_tree, 2)), 1)
+        tree = shapely.STRtree(shapely.box(t_lo[:, 0], t_lo[:, 1], t_hi[:, 0], t_hi[:, 1]))
+        lo = np.round(rng.uniform(0, 20, (400, 2)), 1)
+        hi = lo + np.round(rng.uniform(0, 2, (400, 2)), 1)
+        hi[::10] = lo[::10]  # points; boxes touching at an edge are found too
+        want = tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        got = geometry.envelope_pairs(lo, hi, t_lo, t_hi, tree)
+        assert sorted(zip(*got, strict=True)) == sorted(zip(*want, strict=True))
+        assert len(got[0]) > 0

@@ -221,6 +221,30 @@ def convex_overlap_numpy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return overlap.min(-1)
 
 
+#: Up to this many boxes are searched by testing every pair (compiled), beyond by the tree.
+BOX_SCAN_MAX = 256
+
+
+def envelope_pairs(
+    lo: np.ndarray, hi: np.ndarray, tree_lo: np.ndarray, tree_hi: np.ndarray, tree
+) -> tuple[np.ndarray, np.ndarray]:
+    """The (query, tree item) pairs whose boxes meet, as ``tree.query`` of the boxes
+    ``lo``-``hi`` ``(Q, 2)`` gives them (``tree``: a shapely STRtree of the boxes
+    ``tree_lo``-``tree_hi``): the same pairs, possibly in another order. Few boxes are tested
+    pair by pair (compiled), which costs less than making the query boxes for the tree."""
+    if len(tree_lo) > BOX_SCAN_MAX:
+        return tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+    from swarmpark.core.kernels import box_pairs
+
+    f = np.float64
+    return box_pairs(
+        np.ascontiguousarray(lo, dtype=f),
+        np.ascontiguousarray(hi, dtype=f),
+        np.ascontiguousarray(tree_lo, dtype=f),
+        np.ascontiguousarray(tree_hi, dtype=f),
+    )
+
+
 def point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
     """Distances between points ``(..., 2)`` and segments ``s0 -> s1`` (broadcast)."""
     dx, dy = s1[..., 0] - s0[..., 0], s1[..., 1] - s0[..., 1]

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["convex_overlap_pairs", "convex_distance_pairs", "overlap_one"]
+__all__ = ["convex_overlap_pairs", "convex_distance_pairs", "overlap_one", "box_pairs"]
 
 
 @njit(cache=True)
@@ -108,3 +108,25 @@ def convex_distance_pairs(a, b):  # pragma: no cover - compiled
                 best = min(best, d)
         out[m] = best
     return out
+
+
+@njit(cache=True)
+def box_pairs(lo_q, hi_q, lo_s, hi_s):  # pragma: no cover - compiled
+    """Every pair (query box ``q``, box ``s``) whose boxes meet, edges included (the test of
+    a search tree's envelopes), by ``q`` then ``s``: their indices."""
+    nq, ns = lo_q.shape[0], lo_s.shape[0]
+    qi = np.empty(nq * ns, np.int64)
+    si = np.empty(nq * ns, np.int64)
+    n = 0
+    for q in range(nq):
+        for k in range(ns):
+            if not (
+                lo_s[k, 0] > hi_q[q, 0]
+                or hi_s[k, 0] < lo_q[q, 0]
+                or lo_s[k, 1] > hi_q[q, 1]
+                or hi_s[k, 1] < lo_q[q, 1]
+            ):
+                qi[n] = q
+                si[n] = k
+                n += 1
+    return qi[:n], si[:n]

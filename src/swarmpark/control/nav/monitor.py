@@ -8,7 +8,6 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
@@ -18,6 +17,7 @@ from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import (
     TOUCH_TOLERANCE_M,
     convex_overlap,
+    envelope_pairs,
     footprint_corners,
     rect_disc_gap,
 )
@@ -179,11 +179,11 @@ class CollisionMonitor:
         lo, hi = _bounds(corners)
         glo = lo.reshape(-1, group, 2).min(axis=1)
         ghi = hi.reshape(-1, group, 2).max(axis=1)
-        gi, si = scene.static.tree.query(shapely.box(glo[:, 0], glo[:, 1], ghi[:, 0], ghi[:, 1]))
+        st = scene.static
+        gi, si = envelope_pairs(glo, ghi, st.lo, st.hi, st.tree)
         if len(gi):
             qi = (gi[:, None] * group + np.arange(group)).ravel()
             si = np.repeat(si, group)
-            st = scene.static
             meet = np.all((lo[qi] <= st.hi[si]) & (hi[qi] >= st.lo[si]), axis=1)
             qi, si = qi[meet], si[meet]
             hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
