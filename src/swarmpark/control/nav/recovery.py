@@ -369,14 +369,17 @@ class DeadlockLadder:
         return bump
 
     def _climb(self, st: DeadlockState, s: Stuck, i: int) -> None:
-        first, *later = st.rungs
+        rungs = st.rungs
+        first = rungs[0]
         if st.episode is None:
             first.start(s, self.params, self.backup)
             st.episode = {"robot": i, "start_s": round(s.view.t, 3), "actions": [first.name]}
             self.episodes.append(st.episode)
-        if any(r.holds and r.running(s.view.t) for r in st.rungs):
-            return
-        for rung in later:
+        t = s.view.t
+        for r in rungs:
+            if r.holds and r.running(t):
+                return  # a holding rung runs: no other starts
+        for rung in rungs[1:]:
             if rung.ready(s, self.params):
                 rung.start(s, self.params, self.backup)
                 st.episode["actions"].append(rung.name)
