@@ -257,3 +257,16 @@ def test_envelope_pairs_are_the_search_tree_pairs():
         got = geometry.envelope_pairs(lo, hi, t_lo, t_hi, tree)
         assert sorted(zip(*got, strict=True)) == sorted(zip(*want, strict=True))
         assert len(got[0]) > 0
+
+
+def test_compiled_rollout_corners_equal_the_numpy_transform():
+    from swarmpark.control.nav.kernels import rollout_corners
+    from swarmpark.core.geometry import Footprint, footprint_corners
+
+    rng = np.random.default_rng(11)
+    body = np.stack(
+        [Footprint(rng.uniform(0.8, 2), rng.uniform(0.5, 1)).corners_body() for _ in range(30)]
+    )
+    poses = np.column_stack([rng.uniform(-80, 80, (600, 2)), rng.uniform(-7, 7, 600)])
+    want = footprint_corners(poses, np.repeat(body, 20, axis=0))
+    assert np.array_equal(rollout_corners(poses, body, 20), want)

@@ -16,7 +16,13 @@ from numba import njit
 
 from swarmpark.core.kernels import overlap_one
 
-__all__ = ["rollout_poses", "hits_against_skids", "pairs_touching", "outline_pairs"]
+__all__ = [
+    "rollout_poses",
+    "rollout_corners",
+    "hits_against_skids",
+    "pairs_touching",
+    "outline_pairs",
+]
 
 #: Yaw rates below this are integrated as straight lines (as ``core.geometry``).
 _STRAIGHT_EPS = 1e-9
@@ -131,3 +137,21 @@ def outline_pairs(rb, sk, starts, counts, pts, here, r):  # pragma: no cover - c
                 pt[n] = q
                 n += 1
     return rob[:n], pt[:n]
+
+
+@njit(cache=True)
+def rollout_corners(poses, body, group):  # pragma: no cover - compiled
+    """World corners ``(M, 4, 2)`` of footprints at ``poses`` ``(M, 3)``, pose ``m`` with the
+    body corners ``body[m // group]``, as ``geometry.transform_points`` computes them
+    (``x + c * bx - s * by``, ``y + s * bx + c * by``)."""
+    M, K = poses.shape[0], body.shape[1]
+    out = np.empty((M, K, 2))
+    for m in range(M):
+        c, s = math.cos(poses[m, 2]), math.sin(poses[m, 2])
+        px, py = poses[m, 0], poses[m, 1]
+        b = m // group
+        for k in range(K):
+            bx, by = body[b, k, 0], body[b, k, 1]
+            out[m, k, 0] = px + c * bx - s * by
+            out[m, k, 1] = py + s * bx + c * by
+    return out

@@ -11,7 +11,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
-from swarmpark.control.nav.kernels import hits_against_skids, pairs_touching, rollout_poses
+from swarmpark.control.nav.kernels import (
+    hits_against_skids,
+    pairs_touching,
+    rollout_corners,
+    rollout_poses,
+)
 from swarmpark.control.nav.params import MonitorParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import (
@@ -162,7 +167,7 @@ class CollisionMonitor:
         w_cmd = np.repeat(raw[:, 1], S)
         pose = rollout(view, np.repeat(idx, S), v_cmd, w_cmd, times).reshape(-1, 3)
         owner = np.repeat(np.arange(n_act), S * T)
-        corners = footprint_corners(pose, np.repeat(body, S * T, axis=0))
+        corners = rollout_corners(pose, np.ascontiguousarray(body, dtype=float), S * T)
         bad = self._hits_static(view, corners, scene, group=S * T)
         blockers = self._hits_skids(view, idx, corners, owner, bad, others, scene, robots)
         self._hits_people(view, corners, n_act, bad)
@@ -302,7 +307,9 @@ class CollisionMonitor:
         )
         while len(pairs):
             pose = rollout(view, idx, out[:, 0], out[:, 1], times)
-            corners = footprint_corners(pose.reshape(-1, 3), np.repeat(body, T, axis=0))
+            corners = rollout_corners(
+                pose.reshape(-1, 3), np.ascontiguousarray(body, dtype=float), T
+            )
             corners = np.ascontiguousarray(corners.reshape(len(idx), T, 4, 2), dtype=float)
             hit = pairs_touching(pairs.astype(np.int64), corners, TOUCH_TOLERANCE_M)
             bad = np.unique(pairs[hit])
