@@ -270,3 +270,28 @@ def test_compiled_rollout_corners_equal_the_numpy_transform():
     poses = np.column_stack([rng.uniform(-80, 80, (600, 2)), rng.uniform(-7, 7, 600)])
     want = footprint_corners(poses, np.repeat(body, 20, axis=0))
     assert np.array_equal(rollout_corners(poses, body, 20), want)
+
+
+def test_joint_check_pairs_equal_the_exact_test_at_every_time():
+    from swarmpark.control.nav.kernels import pairs_touching
+    from swarmpark.core.geometry import Footprint, footprint_corners
+
+    rng = np.random.default_rng(13)
+    n, T = 120, 5
+    body = Footprint(1.2, 0.8).corners_body()
+    poses = np.column_stack([rng.uniform(0, 12, (n * T, 2)), rng.uniform(-np.pi, np.pi, n * T)])
+    corners = footprint_corners(poses, np.broadcast_to(body, (n * T, 4, 2))).reshape(n, T, 4, 2)
+    corners[0] = body + [3.0, 3.0]  # heading along x
+    corners[2] = body + [8.0, 8.0]
+    corners[1] = corners[0] + [1.2, 0.0]  # edge to edge: touching, not overlapping
+    corners[3] = corners[2] + [1.2 - 1e-7, 0.0]  # overlapping by 0.1 um
+    a, b = np.triu_indices(n, 1)
+    pairs = np.column_stack([a, b]).astype(np.int64)
+    got = pairs_touching(pairs, np.ascontiguousarray(corners), 1e-9)
+    depth = convex_overlap_numpy(
+        corners[np.repeat(a, T), np.tile(np.arange(T), len(a))],
+        corners[np.repeat(b, T), np.tile(np.arange(T), len(a))],
+    ).reshape(len(a), T)
+    assert got.tolist() == (depth > 1e-9).any(axis=1).tolist()
+    assert got.any() and not got.all()
+    assert not got[0] and got[np.flatnonzero((a == 2) & (b == 3))[0]]

@@ -97,16 +97,47 @@ def hits_against_skids(ra, rb, centres, other_c, corners, others, radius, group,
 
 
 @njit(cache=True)
+def _disc(poly):  # pragma: no cover - compiled
+    """A disc around polygon ``poly`` ``(K, 2)``: its vertices' mean and farthest distance."""
+    K = poly.shape[0]
+    cx, cy = 0.0, 0.0
+    for k in range(K):
+        cx += poly[k, 0]
+        cy += poly[k, 1]
+    cx /= K
+    cy /= K
+    r = 0.0
+    for k in range(K):
+        r = max(r, math.sqrt((poly[k, 0] - cx) ** 2 + (poly[k, 1] - cy) ** 2))
+    return cx, cy, r
+
+
+#: Discs farther apart than their radii and this cannot hold polygons that overlap by more
+#: than the touch tolerance (1e-9 m), whatever the rounding: the exact test is skipped.
+_DISC_SLACK_M = 1e-6
+
+
+@njit(cache=True)
 def pairs_touching(pairs, corners, tol):  # pragma: no cover - compiled
     """Whether each pair ``(a, b)`` of ``pairs`` ``(P, 2)`` overlaps by more than ``tol`` at
     any of the times of ``corners`` ``(n, T, 4, 2)`` (each skid's footprint per time), as the
-    monitor's joint check tests them (stopping at a pair's first hit)."""
-    T = corners.shape[1]
+    monitor's joint check tests them (stopping at a pair's first hit). Footprints whose
+    covering discs are apart are not tested exactly (they cannot overlap)."""
+    n, T = corners.shape[0], corners.shape[1]
+    disc = np.empty((n, T, 3))
+    for a in range(n):
+        for t in range(T):
+            disc[a, t, 0], disc[a, t, 1], disc[a, t, 2] = _disc(corners[a, t])
     out = np.zeros(len(pairs), np.bool_)
     axes = np.empty((corners.shape[2] * 2, 2))
     for p in range(len(pairs)):
         a, b = pairs[p, 0], pairs[p, 1]
         for t in range(T):
+            dx = disc[a, t, 0] - disc[b, t, 0]
+            dy = disc[a, t, 1] - disc[b, t, 1]
+            reach = disc[a, t, 2] + disc[b, t, 2] + _DISC_SLACK_M
+            if dx * dx + dy * dy > reach * reach:
+                continue
             if overlap_one(corners[a, t], corners[b, t], axes) > tol:
                 out[p] = True
                 break
