@@ -305,14 +305,25 @@ class CollisionMonitor:
         pairs = cKDTree(view.poses[idx, :2]).query_pairs(
             reach + 2.0 * speed * times[-1], output_type="ndarray"
         )
-        while len(pairs):
-            pose = rollout(view, idx, out[:, 0], out[:, 1], times)
-            corners = rollout_corners(
-                pose.reshape(-1, 3), np.ascontiguousarray(body, dtype=float), T
-            )
-            corners = np.ascontiguousarray(corners.reshape(len(idx), T, 4, 2), dtype=float)
-            hit = pairs_touching(pairs.astype(np.int64), corners, TOUCH_TOLERANCE_M)
-            bad = np.unique(pairs[hit])
+        body = np.ascontiguousarray(body, dtype=float)
+        corners, test, bad = None, pairs, np.zeros(0, dtype=int)
+        while len(test):
+            if corners is None:
+                pose = rollout(view, idx, out[:, 0], out[:, 1], times)
+                corners = rollout_corners(pose.reshape(-1, 3), body, T).reshape(len(idx), T, 4, 2)
+            else:
+                # Only the skids stopped in the last pass move differently: roll them out
+                # again, and test the pairs with one of them (the others' verdicts stand, and
+                # their skids were stopped already).
+                pose = rollout(view, idx[bad], out[bad, 0], out[bad, 1], times)
+                corners[bad] = rollout_corners(pose.reshape(-1, 3), body[bad], T).reshape(
+                    len(bad), T, 4, 2
+                )
+                moved = np.zeros(len(idx), dtype=bool)
+                moved[bad] = True
+                test = pairs[moved[pairs[:, 0]] | moved[pairs[:, 1]]]
+            hit = pairs_touching(test.astype(np.int64), corners, TOUCH_TOLERANCE_M)
+            bad = np.unique(test[hit])
             bad = bad[np.any(out[bad] != 0.0, axis=1)]
             if not len(bad):
                 return
