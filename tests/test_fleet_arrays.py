@@ -295,3 +295,42 @@ def test_joint_check_pairs_equal_the_exact_test_at_every_time():
     assert got.tolist() == (depth > 1e-9).any(axis=1).tolist()
     assert got.any() and not got.all()
     assert not got[0] and got[np.flatnonzero((a == 2) & (b == 3))[0]]
+
+
+def test_compiled_outline_and_skid_tests_equal_their_numpy_forms():
+    from swarmpark.control.nav.kernels import hits_against_skids, outline_pairs
+    from swarmpark.core.geometry import Footprint, footprint_corners
+
+    rng = np.random.default_rng(17)
+    # Outline points within reach: per (row, skid) pair, the skid's run of points.
+    counts = rng.integers(3, 9, 40)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    pts = rng.uniform(0, 10, (int(counts.sum()), 2))
+    here = rng.uniform(0, 10, (25, 2))
+    r = rng.uniform(0.5, 3.0, 25)
+    rb = np.repeat(np.arange(25), 6)
+    sk = rng.integers(0, 40, len(rb))
+    rob, pt = outline_pairs(rb, sk, starts, counts, pts, here, r)
+    want_rob = np.repeat(rb, counts[sk])
+    want_pt = np.concatenate([np.arange(starts[s], starts[s] + counts[s]) for s in sk])
+    d = pts[want_pt] - here[want_rob]
+    keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= r[want_rob] * r[want_rob]
+    assert rob.tolist() == want_rob[keep].tolist() and pt.tolist() == want_pt[keep].tolist()
+    # Footprints of rollouts (groups of 6) against standing skids.
+    body = Footprint(1.2, 0.8).corners_body()
+    poses = np.column_stack([rng.uniform(0, 8, (60, 2)), rng.uniform(-np.pi, np.pi, 60)])
+    corners = footprint_corners(poses, np.broadcast_to(body, (60, 4, 2)))
+    centres = corners.mean(axis=1)
+    stand = np.column_stack([rng.uniform(0, 8, (15, 2)), rng.uniform(-np.pi, np.pi, 15)])
+    others = footprint_corners(stand, np.broadcast_to(body, (15, 4, 2)))
+    other_c = others.mean(axis=1)
+    ra, rbs = np.repeat(np.arange(10), 15), np.tile(np.arange(15), 10)
+    bad = np.zeros(60, bool)
+    q, b = hits_against_skids(ra, rbs, centres, other_c, corners, others, 1.5, 6, 1e-9, bad)
+    qa = (ra[:, None] * 6 + np.arange(6)).ravel()
+    qb = np.repeat(rbs, 6)
+    near = np.linalg.norm(centres[qa] - other_c[qb], axis=1) <= 1.5
+    qa, qb = qa[near], qb[near]
+    hit = convex_overlap_numpy(corners[qa], others[qb]) > 1e-9
+    assert q.tolist() == qa[hit].tolist() and b.tolist() == qb[hit].tolist()
+    assert bad.tolist() == np.isin(np.arange(60), qa[hit]).tolist() and hit.any()
