@@ -17,3 +17,8 @@ def test_scaling_plot_is_written(tmp_path):
     ]
     out = scaling_png(rows, tmp_path / "img" / "scaling.png")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rvo = [dict(r, steady_mean_ms=r["steady_mean_ms"] * 1.5) for r in rows]
+    both = scaling_png(rows, tmp_path / "both.png", rvo)
+    assert (
+        both.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and both.stat().st_size != out.stat().st_size
+    )

@@ -210,14 +210,18 @@ class MetricsRecorder:
         reset = improved | paused | inside | ~has_goal
         self._best = np.where(reset, remaining, self._best)
         self._best_t = np.where(reset, t, self._best_t)
-        for i in range(len(self.ids)):
+        # Only the skids whose state changes are visited (in index order, as one loop would).
+        open_ = self.stuck()
+        starts = ~open_ & (t - self._best_t >= DEADLOCK_WINDOW_S) & has_goal
+        ends = open_ & reset
+        for i in np.flatnonzero(starts | ends).tolist():
             dl = self._deadlock[i]
-            if dl is None and t - self._best_t[i] >= DEADLOCK_WINDOW_S and has_goal[i]:
+            if dl is None:
                 dl = Deadlock(self.ids[i], float(self._best_t[i]))
                 dl.cause = None if self.explain is None else self.explain(i)
                 self._deadlock[i] = dl
                 self.deadlocks.append(dl)
-            elif dl is not None and reset[i]:
+            else:
                 dl.end_s = t
                 dl.resolved_by = "progress" if improved[i] or inside[i] else "paused"
                 self._deadlock[i] = None

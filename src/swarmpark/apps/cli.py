@@ -251,7 +251,9 @@ def cmd_bench(args) -> int:
     if fleet is not None and "nav.fleet" in selected and not args.quick:
         from swarmpark.apps.bench.plots import scaling_png
 
-        print(f"wrote {scaling_png(fleet['rows'], Path(args.plot))}")
+        rvo = report["benchmarks"].get("nav.fleet_rvo")
+        rvo_rows = rvo["rows"] if rvo is not None else None
+        print(f"wrote {scaling_png(fleet['rows'], Path(args.plot), rvo_rows)}")
     return EXIT_OK
 
 

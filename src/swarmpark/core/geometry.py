@@ -193,12 +193,56 @@ def convex_overlap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     projections over all edge normals: positive when the interiors intersect, zero or negative
     when they are separated or touch.
     """
+    from swarmpark.core.kernels import convex_overlap_pairs
+
+    # Compiled: the same numbers as convex_overlap_numpy, without its (M, axes, K) temporaries.
+    return convex_overlap_pairs(*_pairs_arrays(a, b))
+
+
+def _pairs_arrays(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``a`` and ``b`` as C-contiguous float arrays ``(M, K, 2)`` and ``(M, L, 2)`` for the
+    compiled kernels (a single polygon, ``M = 1``, broadcast against the other side)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    m = max(len(a), len(b))
+    if len(a) != m:
+        a = np.broadcast_to(a, (m, *a.shape[1:]))
+    if len(b) != m:
+        b = np.broadcast_to(b, (m, *b.shape[1:]))
+    return np.ascontiguousarray(a), np.ascontiguousarray(b)
+
+
+def convex_overlap_numpy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`convex_overlap` in numpy (the reference the compiled form is tested against)."""
     axes = np.concatenate([_edge_normals(a), _edge_normals(b)], axis=1)  # (M, K+L, 2)
     ax, ay = axes[:, :, None, 0], axes[:, :, None, 1]
     pa = ax * a[:, None, :, 0] + ay * a[:, None, :, 1]  # (M, axes, K)
     pb = ax * b[:, None, :, 0] + ay * b[:, None, :, 1]
     overlap = np.minimum(pa.max(-1), pb.max(-1)) - np.maximum(pa.min(-1), pb.min(-1))
     return overlap.min(-1)
+
+
+#: Up to this many boxes are searched by testing every pair (compiled), beyond by the tree.
+BOX_SCAN_MAX = 256
+
+
+def envelope_pairs(
+    lo: np.ndarray, hi: np.ndarray, tree_lo: np.ndarray, tree_hi: np.ndarray, tree
+) -> tuple[np.ndarray, np.ndarray]:
+    """The (query, tree item) pairs whose boxes meet, as ``tree.query`` of the boxes
+    ``lo``-``hi`` ``(Q, 2)`` gives them (``tree``: a shapely STRtree of the boxes
+    ``tree_lo``-``tree_hi``): the same pairs, possibly in another order. Few boxes are tested
+    pair by pair (compiled), which costs less than making the query boxes for the tree."""
+    if len(tree_lo) > BOX_SCAN_MAX:
+        return tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+    from swarmpark.core.kernels import box_pairs
+
+    f = np.float64
+    return box_pairs(
+        np.ascontiguousarray(lo, dtype=f),
+        np.ascontiguousarray(hi, dtype=f),
+        np.ascontiguousarray(tree_lo, dtype=f),
+        np.ascontiguousarray(tree_hi, dtype=f),
+    )
 
 
 def point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
@@ -212,6 +256,14 @@ def point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.
 
 def convex_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance ``(M,)`` between convex polygon pairs known not to overlap (0 if touching)."""
+    from swarmpark.core.kernels import convex_distance_pairs
+
+    # Compiled: the same numbers as convex_distance_numpy.
+    return convex_distance_pairs(*_pairs_arrays(a, b))
+
+
+def convex_distance_numpy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`convex_distance` in numpy (the reference the compiled form is tested against)."""
     a_next, b_next = np.roll(a, -1, axis=1), np.roll(b, -1, axis=1)
     # Each vertex of one polygon against each edge of the other: (M, K, L).
     d_ab = point_segment_distance(a[:, :, None, :], b[:, None, :, :], b_next[:, None, :, :])

@@ -17,6 +17,7 @@ simulated robot carried by hand reports again within the same tick).
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -34,6 +35,9 @@ __all__ = [
     "TrackedPeople",
     "VelocityCommand",
     "Message",
+    "ReportBatch",
+    "Arrivals",
+    "CommandBatch",
     "Inbox",
 ]
 
@@ -146,6 +150,73 @@ class TrackedPeople:
 Message = Odometry | PoseReport | Scan | Status | TrackedPeople
 
 
+@dataclass(frozen=True, eq=False)
+class ReportBatch:
+    """What many robots report at one ``stamp``, as arrays: a fleet's odometry, and its
+    map-frame poses and scans where given, one row per robot (each robot once). A simulated
+    fleet sends this instead of a message per robot, so the inbox folds it in array by array;
+    :meth:`messages` gives the same reports one message per robot (row ``k`` carries the
+    counter ``seq[k]`` in each of its messages)."""
+
+    ids: tuple[str, ...]  # robot of each row
+    stamp: float
+    odom: np.ndarray  # (n, 3) odom frame
+    vel: np.ndarray  # (n, 2)
+    seq: np.ndarray  # (n,) int
+    pose: np.ndarray | None = None  # (n, 3) map frame
+    ranges: np.ndarray | None = None  # (n, B)
+
+    def messages(self) -> list[Message]:
+        """The reports as single messages, robot by robot (odometry, pose, scan)."""
+        out: list[Message] = []
+        t = self.stamp
+        for k, (rid, sq) in enumerate(zip(self.ids, self.seq.tolist(), strict=True)):
+            out.append(Odometry(rid, t, self.odom[k].copy(), self.vel[k].copy(), sq))
+            if self.pose is not None:
+                out.append(PoseReport(rid, t, self.pose[k].copy(), sq))
+            if self.ranges is not None:
+                out.append(Scan(rid, t, self.ranges[k], sq))
+        return out
+
+
+class Arrivals(Sequence):
+    """Messages as a link delivered them, some of them in :class:`ReportBatch` objects: read as
+    a sequence it holds single messages only (batches expanded in place, on first use);
+    :meth:`Inbox.absorb` folds the batches in whole (``parts``)."""
+
+    def __init__(self, parts: Iterable[Message | ReportBatch] = ()) -> None:
+        self.parts = list(parts)
+        self._flat: list[Message] | None = None
+
+    def _messages(self) -> list[Message]:
+        if self._flat is None:
+            flat: list[Message] = []
+            for m in self.parts:
+                if isinstance(m, ReportBatch):
+                    flat += m.messages()
+                else:
+                    flat.append(m)
+            self._flat = flat
+        return self._flat
+
+    def __len__(self) -> int:
+        return len(self._messages())
+
+    def __getitem__(self, k):
+        return self._messages()[k]
+
+    def __iter__(self) -> Iterator[Message]:
+        return iter(self._messages())
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Sequence) and list(self) == list(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"Arrivals({self._messages()!r})"
+
+
 @dataclass(frozen=True)
 class VelocityCommand:
     """What a robot is told: drive at ``(v, omega)`` (REP-103), sent at ``stamp``."""
@@ -154,6 +225,32 @@ class VelocityCommand:
     stamp: float
     v: float
     omega: float
+
+
+@dataclass(frozen=True, eq=False)
+class CommandBatch(Sequence):
+    """Velocity commands for many robots at one ``stamp``: robot ``ids[rows[k]]`` is told
+    ``cmd[k]`` ``(v, omega)``. Read as a sequence it is the :class:`VelocityCommand` objects, so any
+    link takes it; the simulator's link applies it as arrays."""
+
+    ids: tuple[str, ...]
+    rows: np.ndarray  # (k,) int, each robot once
+    stamp: float
+    cmd: np.ndarray  # (k, 2)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return list(self)[k]
+        v, w = self.cmd[k].tolist()
+        return VelocityCommand(self.ids[int(self.rows[k])], self.stamp, v, w)
+
+    def __iter__(self) -> Iterator[VelocityCommand]:
+        ids, t = self.ids, self.stamp
+        for i, (v, w) in zip(self.rows.tolist(), self.cmd.tolist(), strict=True):
+            yield VelocityCommand(ids[i], t, v, w)
 
 
 # ----------------------------------------------------------------------------- the protocol
@@ -221,7 +318,11 @@ class Inbox:
     people: TrackedPeople | None = None
     #: robots with a scan that has not been taken by :meth:`take_scans` yet
     _new_scan: np.ndarray = field(init=False)
-    _last: dict = field(init=False)
+    #: per kind of report, the (stamp, seq) of the last one taken from each robot
+    _last_stamp: dict = field(init=False)
+    _last_seq: dict = field(init=False)
+    _batch_ids: tuple | None = field(init=False, default=None)
+    _batch_rows: np.ndarray | None = field(init=False, default=None)
     ignored: int = 0  # messages dropped as stale or duplicate
 
     def __post_init__(self) -> None:
@@ -235,11 +336,17 @@ class Inbox:
         for name in ("odom_stamp", "pose_stamp", "scan_stamp", "status_stamp", "last_seen"):
             setattr(self, name, np.full(n, -np.inf))
         self._new_scan = np.zeros(n, dtype=bool)
-        self._last = {k: [(-np.inf, -1)] * n for k in ("odom", "pose", "scan", "status")}
+        kinds = ("odom", "pose", "scan", "status")
+        self._last_stamp = {k: np.full(n, -np.inf) for k in kinds}
+        self._last_seq = {k: np.full(n, -1, dtype=np.int64) for k in kinds}
 
-    def absorb(self, messages: list[Message]) -> None:
-        """Fold ``messages`` in (in any order)."""
-        for m in messages:
+    def absorb(self, messages: Iterable[Message] | Arrivals) -> None:
+        """Fold ``messages`` in (in any order); :class:`ReportBatch` objects are folded whole,
+        with the same outcome as their messages one by one."""
+        for m in messages.parts if isinstance(messages, Arrivals) else messages:
+            if isinstance(m, ReportBatch):
+                self._absorb_batch(m)
+                continue
             if isinstance(m, TrackedPeople):
                 if self.people is None or m.stamp > self.people.stamp:
                     self.people = m
@@ -258,11 +365,63 @@ class Inbox:
     def _newer(self, m: Message, kind: str, i: int) -> bool:
         """``m`` is newer than the last message of this kind from robot ``i`` (by stamp, then
         by the sender's counter); if so it becomes the last one."""
-        key = (m.stamp, m.seq)
-        if key <= self._last[kind][i]:
+        stamps, seqs = self._last_stamp[kind], self._last_seq[kind]
+        if (m.stamp, m.seq) <= (float(stamps[i]), int(seqs[i])):
             return False
-        self._last[kind][i] = key
+        stamps[i], seqs[i] = m.stamp, m.seq
         return True
+
+    def _newer_rows(self, kind: str, rows: np.ndarray, stamp: float, seq: np.ndarray):
+        """:meth:`_newer` for a batch: which of ``rows`` (distinct) it is newer for."""
+        stamps, seqs = self._last_stamp[kind], self._last_seq[kind]
+        ls = stamps[rows]
+        new = (stamp > ls) | ((stamp == ls) & (seq > seqs[rows]))
+        take = rows[new]
+        stamps[take] = stamp
+        seqs[take] = seq[new]
+        self.ignored += int(len(rows) - len(take))
+        return new, take
+
+    def _rows(self, ids: tuple[str, ...]) -> np.ndarray:
+        """Indices of ``ids`` in this fleet (-1: unknown), kept for the next batch alike."""
+        if ids is not self._batch_ids:
+            rows = [self.index.get(rid, -1) for rid in ids]
+            self._batch_ids, self._batch_rows = ids, np.array(rows, dtype=np.int64)
+        return self._batch_rows
+
+    def _absorb_batch(self, b: ReportBatch) -> None:
+        rows = self._rows(b.ids)
+        known = rows >= 0
+        kinds = 1 + (b.pose is not None) + (b.ranges is not None)
+        sel = slice(None)
+        if not known.all():
+            self.ignored += kinds * int((~known).sum())  # robots this fleet does not know
+            sel = known
+            rows = rows[known]
+        seq = np.asarray(b.seq)[sel]
+        t = b.stamp
+        heard = np.zeros(len(rows), dtype=bool)
+        new, take = self._newer_rows("odom", rows, t, seq)
+        self.odom[take], self.vel[take], self.odom_stamp[take] = (
+            b.odom[sel][new],
+            b.vel[sel][new],
+            t,
+        )
+        heard |= new
+        if b.pose is not None:
+            new, take = self._newer_rows("pose", rows, t, seq)
+            self.pose[take], self.pose_stamp[take] = b.pose[sel][new], t
+            heard |= new
+        if b.ranges is not None:
+            new, take = self._newer_rows("scan", rows, t, seq)
+            ranges = b.ranges[sel]
+            for k, i in zip(np.flatnonzero(new).tolist(), take.tolist(), strict=True):
+                self.scans[i] = ranges[k]
+            self.scan_stamp[take] = t
+            self._new_scan[take] = True
+            heard |= new
+        seen = rows[heard]
+        self.last_seen[seen] = np.maximum(self.last_seen[seen], t)
 
     def _fresh(self, m: Message, i: int) -> bool:
         if isinstance(m, Odometry):

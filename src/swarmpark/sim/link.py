@@ -24,10 +24,13 @@ import numpy as np
 
 from swarmpark.core.geometry import pad_polygons, triangulate, wrap_angle
 from swarmpark.links.base import (
+    Arrivals,
+    CommandBatch,
     FleetInfo,
     Message,
     Odometry,
     PoseReport,
+    ReportBatch,
     Scan,
     Status,
     TrackedPeople,
@@ -103,9 +106,12 @@ class SimLink:
         self._cmd = np.zeros((n, 2))
         self._cmd_t = np.full(n, -np.inf)
         self._hold = np.zeros(n, dtype=bool)
-        self._queue: list[tuple[float, int, Message]] = []  # (deliver at, seq, message)
+        # (deliver at, seq, message or a whole fleet's reports)
+        self._queue: list[tuple[float, int, Message | ReportBatch]] = []
         self._seq = 0
         self._status = [""] * n
+        self._blocked = np.zeros(n, dtype=np.int8)  # the status last reported: 1 blocked
+        self._blocked[:] = -1  # nothing reported yet
         seed = np.random.SeedSequence(world.scenario.seed)
         scan_seed, loc_seed = seed.spawn(2)
         # The odometry's stream is the one the fleet localizer used to give it (its last
@@ -151,14 +157,21 @@ class SimLink:
     def now(self) -> float:
         return self.sim.t
 
-    def receive(self) -> list[Message]:
+    def receive(self) -> Arrivals:
         out = []
         now = self.sim.t + 1e-9
         while self._queue and self._queue[0][0] <= now:
             out.append(heapq.heappop(self._queue)[2])
-        return out
+        return Arrivals(out)
 
-    def send(self, commands: list[VelocityCommand]) -> None:
+    def send(self, commands: list[VelocityCommand] | CommandBatch) -> None:
+        if isinstance(commands, CommandBatch) and not self.faults and commands.ids == self.ids:
+            # A whole fleet's commands as arrays (the same outcome as one by one below).
+            i, stamp = commands.rows, commands.stamp
+            newer = stamp >= self._cmd_t[i]
+            self._cmd[i[newer]] = commands.cmd[newer]
+            self._cmd_t[i[newer]] = stamp
+            return
         for c in commands:
             i = self._index.get(c.robot)
             if i is None:
@@ -223,6 +236,35 @@ class SimLink:
             self.odometry.step(sim.poses)
         odom = self._odom_poses()
         ranges = self._scan() if scan else None
+        if self.faults:
+            self._publish_each(odom, ranges, step)
+        else:
+            # No faults act on the messages: the fleet's reports go as one batch (the inbox
+            # takes them as it would one by one; each robot gets its own counter value).
+            n = sim.n
+            seq = np.arange(self._seq + 1, self._seq + 1 + n)
+            self._seq += n
+            batch = ReportBatch(
+                self.ids,
+                sim.t,
+                odom.copy(),
+                sim.vel.copy(),
+                seq,
+                pose=None if self.sensing else sim.poses.copy(),
+                ranges=ranges,
+            )
+            heapq.heappush(self._queue, (batch.stamp, self._next_seq(), batch))
+            blocked = np.zeros(n, np.int8) if step is None else step.blocked.astype(np.int8)
+            for i in np.flatnonzero(blocked != self._blocked).tolist():
+                self._status[i] = "blocked" if blocked[i] else "ok"
+                self._emit(Status(self.ids[i], sim.t, self._status[i], self._next_seq()))
+            self._blocked = blocked
+        if not self.sensing:
+            self._emit(self._people())
+
+    def _publish_each(self, odom: np.ndarray, ranges, step: StepResult | None) -> None:
+        """The reports one message per robot, each through the faults of its link."""
+        sim = self.sim
         for i, rid in enumerate(self.ids):
             self._emit(self._odometry_msg(i, odom))
             if not self.sensing:
@@ -232,9 +274,8 @@ class SimLink:
             state = "blocked" if step is not None and step.blocked[i] else "ok"
             if state != self._status[i]:
                 self._status[i] = state
+                self._blocked[i] = state == "blocked"
                 self._emit(Status(rid, sim.t, state, self._next_seq()))
-        if not self.sensing:
-            self._emit(self._people())
 
     def _emit(self, m: Message) -> None:
         """Queue a robot's message for delivery, through the faults of its link."""

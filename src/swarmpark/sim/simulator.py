@@ -29,6 +29,7 @@ from swarmpark.core.geometry import (
     body_corners,
     convex_distance,
     convex_overlap,
+    envelope_pairs,
     footprint_corners,
     integrate_unicycle,
     pivot_to_center,
@@ -104,6 +105,7 @@ class Simulator:
         self.static_pieces, self.static_owner = world.static_convex_pieces()
         lo, hi = self.static_pieces.min(axis=1), self.static_pieces.max(axis=1)
         self._static_tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        self._static_lo, self._static_hi = lo, hi
         # A map image's occupied blocks are solid all through: the pieces above are their
         # outline cells, and the interior cells are checked on the grid (a skid that got
         # inside a block some other way, carried there by hand, still collides).
@@ -293,7 +295,7 @@ class Simulator:
         fr = np.flatnonzero(focus_r)
         if len(fr):
             lo, hi = corners[fr].min(axis=1), corners[fr].max(axis=1)
-            qi, si = self._static_tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+            qi, si = self._static_pairs(lo, hi)
             ri = fr[qi]
             hit = convex_overlap(corners[ri], self.static_pieces[si]) > TOUCH_TOLERANCE_M
             bad_r[ri[hit]] = True
@@ -328,6 +330,10 @@ class Simulator:
                 }
         return bad_r, bad_p, contacts
 
+    def _static_pairs(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(box, static piece) pairs whose boxes meet (as the pieces' search tree finds them)."""
+        return envelope_pairs(lo, hi, self._static_lo, self._static_hi, self._static_tree)
+
     def _boxes_hold_interior(self, corners: np.ndarray) -> np.ndarray:
         """Bool ``(N,)``: the footprints' bounding boxes hold an interior block cell."""
         r0, c0, r1, c1 = self.world.grid.cell_windows(corners)
@@ -360,7 +366,7 @@ class Simulator:
                     (self.ids[a], self.ids[b]) for a, b in zip(i[close], j[close], strict=True)
                 }
         lo, hi = corners.min(axis=1) - CLEARANCE_RANGE_M, corners.max(axis=1) + CLEARANCE_RANGE_M
-        ri, si = self._static_tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        ri, si = self._static_pairs(lo, hi)
         if len(ri):
             gap = convex_distance(corners[ri], self.static_pieces[si])
             np.minimum.at(clear_s, ri, gap)

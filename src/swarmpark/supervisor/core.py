@@ -22,7 +22,7 @@ import numpy as np
 
 from swarmpark.control.base import Controller, ControlView
 from swarmpark.core.geometry import body_corners
-from swarmpark.links.base import Inbox, RobotLink, VelocityCommand
+from swarmpark.links.base import CommandBatch, Inbox, RobotLink
 from swarmpark.metrics import (
     HEADING_TOL_RAD,
     POSITION_TOL_M,
@@ -350,13 +350,8 @@ class Supervisor(CommandsMixin):
         t = self.t
         # Never a command to a robot whose state is unknown (it never reported).
         known = ~self.health.unknown
-        self.link.send(
-            [
-                VelocityCommand(rid, t, float(v), float(w))
-                for rid, (v, w), ok in zip(self.ids, cmd.tolist(), known, strict=True)
-                if ok
-            ]
-        )
+        rows = np.flatnonzero(known)
+        self.link.send(CommandBatch(self.info.ids, rows, t, cmd[rows]))
         self._sent = np.where(known[:, None], cmd, 0.0)
         if self.estopped:
             self.link.stop(list(self.ids))

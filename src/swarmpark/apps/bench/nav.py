@@ -134,9 +134,10 @@ def bench_tick(quick: bool) -> list[dict]:
     return rows
 
 
-def fleet_park_world(n: int):
+def fleet_park_world(n: int, avoidance: str | None = None):
     """``n`` skids in columns of 10 on the left of a hall sized to fit them, parking into one
-    boundary on the right (the ``nav.tick`` layout, widened for big fleets)."""
+    boundary on the right (the ``nav.tick`` layout, widened for big fleets); ``avoidance``
+    sets ``navigation.avoidance`` (by default the scenario default, the monitor)."""
     from swarmpark.world.scenario import build_world, parse_scenario
 
     robots = [
@@ -161,6 +162,8 @@ def fleet_park_world(n: int):
             }
         ],
     }
+    if avoidance is not None:
+        data["navigation"] = {"avoidance": avoidance}
     return build_world(parse_scenario(data))
 
 
@@ -168,14 +171,15 @@ def fleet_park_world(n: int):
 FLEET_SIZES = (10, 50, 100, 200, 500, 1000)
 
 
-def fleet_ticks(n: int, steady: int) -> dict:
+def fleet_ticks(n: int, steady: int, avoidance: str | None = None) -> dict:
     """CPU times (``time.process_time``) of a park command for ``n`` skids: the first tick,
-    every tick until all skids have their first path, and ``steady`` ticks after 20 more."""
+    every tick until all skids have their first path, and ``steady`` ticks after 20 more
+    (``avoidance``: as :func:`fleet_park_world`)."""
     import time
 
     from swarmpark.supervisor.core import Supervisor
 
-    sup = Supervisor(fleet_park_world(n))
+    sup = Supervisor(fleet_park_world(n, avoidance))
     t0 = time.process_time()
     sup.tick()  # the park command: layout, assignment, the first plans
     first = time.process_time() - t0
@@ -200,23 +204,17 @@ def fleet_ticks(n: int, steady: int) -> dict:
     }
 
 
-def _warm_up() -> None:
+def _warm_up(avoidance: str | None = None) -> None:
     """One small park first, so no row pays for loading the compiled kernels (numba)."""
-    fleet_ticks(10, 1)
+    fleet_ticks(10, 1, avoidance)
 
 
-@register(
-    "nav.fleet",
-    "full ticks with a park command for the whole fleet, CPU time (time.process_time); "
-    "planning: the ticks until every skid has its first path",
-    target="steady tick mean <= 10 ms at 200 skids, <= 50 ms at 1000, p99 <= 3x mean; "
-    "first tick <= 200 ms at 100",
-)
-def bench_fleet(quick: bool) -> list[dict]:
-    _warm_up()
+def _fleet_rows(quick: bool, avoidance: str | None = None) -> list[dict]:
+    """The ``nav.fleet`` rows (see :func:`bench_fleet`) with ``avoidance``."""
+    _warm_up(avoidance)
     rows = []
     for n in FLEET_SIZES[:2] if quick else FLEET_SIZES:
-        r = fleet_ticks(n, 20 if quick else 100)
+        r = fleet_ticks(n, 20 if quick else 100, avoidance)
         ms, plan = r["steady"] * 1e3, r["planning"] * 1e3
         mean, p99 = float(ms.mean()), float(np.percentile(ms, 99))
         targets = {100: r["first"] <= 0.2, 200: mean <= 10.0, 1000: mean <= 50.0}
@@ -234,6 +232,28 @@ def bench_fleet(quick: bool) -> list[dict]:
             }
         )
     return rows
+
+
+@register(
+    "nav.fleet",
+    "full ticks with a park command for the whole fleet, CPU time (time.process_time); "
+    "planning: the ticks until every skid has its first path",
+    target="steady tick mean <= 10 ms at 200 skids, <= 50 ms at 1000, p99 <= 3x mean; "
+    "first tick <= 200 ms at 100",
+)
+def bench_fleet(quick: bool) -> list[dict]:
+    return _fleet_rows(quick)
+
+
+@register(
+    "nav.fleet_rvo",
+    "nav.fleet with RVO avoidance (navigation: {avoidance: rvo}: make room, the deadlock "
+    "ladder, ORCA, then the monitor jointly), CPU time (time.process_time)",
+    target="steady tick mean <= 10 ms at 200 skids, <= 50 ms at 1000, p99 <= 3x mean; "
+    "first tick <= 200 ms at 100",
+)
+def bench_fleet_rvo(quick: bool) -> list[dict]:
+    return _fleet_rows(quick, "rvo")
 
 
 @register(

@@ -8,10 +8,10 @@ from pathlib import Path
 __all__ = ["scaling_png"]
 
 
-def scaling_png(rows: list[dict], out: Path) -> Path:
+def scaling_png(rows: list[dict], out: Path, rvo_rows: list[dict] | None = None) -> Path:
     """Draw the ``nav.fleet`` rows to ``out`` (PNG): steady tick mean and p99, the heaviest
     planning tick and the first tick per fleet size, the control period as the real-time
-    line, and the targets."""
+    line, and the targets; with ``rvo_rows`` (``nav.fleet_rvo``) also its steady tick."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,6 +30,13 @@ def scaling_png(rows: list[dict], out: Path) -> Path:
         pts = [(r["N"], r[key]) for r in rows if r.get(key)]
         if pts:
             ax.plot(*zip(*pts, strict=True), style, color=colour, label=label)
+    for key, label, style in (
+        ("steady_mean_ms", "steady tick with RVO, mean", "D-"),
+        ("steady_p99_ms", "steady tick with RVO, p99", "D--"),
+    ):
+        pts = sorted((r["N"], r[key]) for r in rvo_rows or () if r.get(key))
+        if pts:
+            ax.plot(*zip(*pts, strict=True), style, color="C2", label=label)
     period = rows[0].get("control_period_ms", 50.0)
     ax.axhline(period, color="k", lw=1.2, label=f"real time (control period {period:g} ms)")
     ax.plot([200, 1000], [10, 50], "k*", ms=11, label="steady-tick targets")

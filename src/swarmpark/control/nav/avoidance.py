@@ -11,6 +11,7 @@ without orders are immobile: everyone else takes the full share against them.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,6 +67,29 @@ class AvoidanceResult:
     commands: np.ndarray
     along: np.ndarray
     on_axis: np.ndarray
+
+
+def _facing(centres, u_pref, kk, i, j, cruising, others, near):
+    """Per pair (skid ``i`` = ``cruising[kk]``, mover ``j``): whether ``j`` is ahead of ``i``
+    (``(c_j - c_i) . u_i > 0``) and comes the other way (``u_j . u_i < 0``).
+
+    These were one matrix-vector product per skid (BLAS, which may fuse the multiply-add);
+    the two products summed here round differently, but the sign of the sum is the same
+    unless it is exactly zero, so the pairs of skids with a zero are decided again by their
+    skid's own matrix-vector products, and the result is the same as before."""
+    u = u_pref[i]
+    d = centres[j] - centres[i]
+    dot_a = d[:, 0] * u[:, 0] + d[:, 1] * u[:, 1]
+    dot_o = u_pref[j, 0] * u[:, 0] + u_pref[j, 1] * u[:, 1]
+    ahead, oncoming = dot_a > 0, dot_o < 0
+    for k in np.unique(kk[(dot_a == 0) | (dot_o == 0)]).tolist():
+        ic = cruising[k]
+        jk = others[near[k]]
+        jk = jk[jk != ic]
+        rows = np.flatnonzero(kk == k)  # the same movers, in the same order
+        ahead[rows] = (centres[jk] - centres[ic]) @ u_pref[ic] > 0
+        oncoming[rows] = u_pref[jk] @ u_pref[ic] < 0
+    return ahead, oncoming
 
 
 class OrcaAdapter:
@@ -208,15 +232,21 @@ class OrcaAdapter:
             return turn
         others = np.flatnonzero(movers)
         near = cKDTree(centres[others]).query_ball_point(centres[cruising], p.keep_right_range_m)
-        for k, (i, cand) in enumerate(zip(cruising, near, strict=True)):
-            j = others[cand]
-            j = j[j != i]
-            ahead = (centres[j] - centres[i]) @ u_pref[i] > 0
-            oncoming = u_pref[j] @ u_pref[i] < 0
-            meet = j[ahead & oncoming]
-            if len(meet):
-                share = responsibility_shares(prio[i], prio[meet], p.min_share).max()
-                turn[k] = min(2.0 * share * p.keep_right_rad, p.keep_right_max_rad)
+        # Every (cruising skid, mover near it) pair at once.
+        lens = np.fromiter(map(len, near), int, len(near))
+        kk = np.repeat(np.arange(len(cruising)), lens)
+        j = others[np.fromiter(itertools.chain.from_iterable(near), int, int(lens.sum()))]
+        i = cruising[kk]
+        kk, i, j = kk[j != i], i[j != i], j[j != i]
+        ahead, oncoming = _facing(centres, u_pref, kk, i, j, cruising, others, near)
+        meet = ahead & oncoming
+        if meet.any():
+            kk, i, j = kk[meet], i[meet], j[meet]
+            share = responsibility_shares(prio[i], prio[j], p.min_share)
+            best = np.full(len(cruising), -np.inf)
+            np.maximum.at(best, kk, share)  # the largest share per skid (exact in any order)
+            met = np.unique(kk)
+            turn[met] = np.minimum(2.0 * best[met] * p.keep_right_rad, p.keep_right_max_rad)
         kd = scene.static.kd
         if kd is not None and turn.any():
             # Beyond keep_right_open_m the fade is 1 whatever the distance (inf included).

@@ -91,14 +91,28 @@ class Docking:
         """Commands for robots ``idx``: the manoeuvre where it applies (``final``: in the final
         approach), else ``raw`` (or a back-up). Updates the robots' states."""
         # Per-skid scalars as Python floats, converted once for all (not per skid).
-        errors = np.column_stack(goal_frame_errors(view.poses[idx], view.goals[idx])).tolist()
+        err = np.column_stack(goal_frame_errors(view.poses[idx], view.goals[idx]))
+        errors = err.tolist()
         changed = view.goal_changed[idx].tolist()
         fin = np.asarray(final, dtype=bool).tolist()
+        p = self.params
+        parked = (
+            (np.abs(err[:, 0]) < p.parked_pos_m)
+            & (np.abs(err[:, 1]) < p.dock_lateral_m)
+            & (np.abs(err[:, 2]) < p.parked_yaw_rad)
+        ).tolist()
+        stall_s = self.backup.stall_s
         out = raw.copy()
         for k, i in enumerate(idx.tolist()):
             st = docks[i]
             if changed[k]:
                 st.new_goal()
+            elif not (fin[k] or parked[k] or st.docked or st.settled):
+                # On the way, not backing up and not held still long enough to start: what
+                # _one would conclude (the field's command stands), without its steps.
+                if backups[i].left_m <= 0 and stalls[i].stalled_s < stall_s:
+                    st.runup = False
+                    continue
             e = tuple(errors[k])
             cmd = self._one(view, i, raw[k], fin[k], e, st, stalls[i], backups[i])
             if cmd is not None:

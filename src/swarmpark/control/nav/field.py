@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
 from swarmpark.control.nav.apf import attraction, forces_to_command, repulsion
+from swarmpark.control.nav.kernels import outline_pairs
 from swarmpark.control.nav.params import FieldParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import transform_points, wrap_angle
@@ -48,6 +49,8 @@ class PotentialField:
         self.params = params
         self.dynamic = dynamic
         self._outline = None  # the SkidOutlines the per-skid point ranges below are for
+        self._fps = None  # the footprints the action points below are for
+        self._points: tuple = ()
 
     def drive(
         self,
@@ -64,10 +67,8 @@ class PotentialField:
         (``final``) and within ``near_m`` of the goal only obstacles within
         ``influence_at_goal_m`` repel (parked neighbours sit just beyond)."""
         p = self.params
-        fps = view.footprints
-        x_front = np.array([fps[i].length_m - fps[i].pivot for i in idx])
-        x_rear = -np.array([fps[i].pivot for i in idx])
-        half_w = np.array([fps[i].width_m / 2 for i in idx])
+        front, rear, half = self._action_points(view.footprints)
+        x_front, x_rear, half_w = front[idx], rear[idx], half[idx]
         poses = view.poses[idx]
         # Attraction, weighted by the distance still to go (core.progress) to the goal.
         dist_goal = np.linalg.norm(view.goals[idx, :2] - poses[:, :2], axis=1)
@@ -89,6 +90,18 @@ class PotentialField:
         raw[:, 0] = np.clip(raw[:, 0], -view.max_speed[idx], view.max_speed[idx])
         raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
         return raw, dist_goal
+
+    def _action_points(self, fps) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Body-x of every skid's front and rear action points and its half width ``(N,)``,
+        kept while the footprints stay the same."""
+        if fps is not self._fps and fps != self._fps:
+            self._points = (
+                np.array([f.length_m - f.pivot for f in fps]),
+                -np.array([f.pivot for f in fps]),
+                np.array([f.width_m / 2 for f in fps]),
+            )
+        self._fps = fps
+        return self._points
 
     def repulsion(self, view, idx, scene: Scene, x_front, x_rear, half_w, influence):
         """Summed body-frame repulsion on the front and rear action points of robots ``idx``."""
@@ -138,26 +151,39 @@ class PotentialField:
             self._rad = np.zeros(len(skids.reach))
             np.maximum.at(self._rad, skids.owner, np.hypot(*skids.points.T))
         here = view.poses[idx, :2]
+        r = np.asarray(r, dtype=float)
         rob_l, pt_l = [], []
         if n_pts and len(dyn) >= n_pts:
             near = cKDTree(view.poses[:, :2]).sparse_distance_matrix(
                 cKDTree(here), float(r.max() + self._rad.max()), output_type="ndarray"
             )
-            sk, rb = near["i"].astype(int), near["j"].astype(int)
-            cnt = self._counts[sk]
-            rob = np.repeat(rb, cnt)
-            first = np.repeat(self._starts[sk] - np.cumsum(cnt) + cnt, cnt)
-            pt = first + np.arange(len(rob))
+            sk, rb = near["i"].astype(np.int64), near["j"].astype(np.int64)
+            # By robot row, then skid: each skid's points are one ascending run, and the
+            # runs ascend with the skid, so the pairs come out sorted by (row, point).
+            by_row = np.lexsort((sk, rb))
+            # Compiled (kernels.outline_pairs): the points of those skids within reach.
+            rob, pt = outline_pairs(
+                rb[by_row],
+                sk[by_row],
+                self._starts.astype(np.int64),
+                self._counts.astype(np.int64),
+                np.ascontiguousarray(dyn[:n_pts], dtype=float),
+                np.ascontiguousarray(here, dtype=float),
+                r,
+            )
             rob_l.append(rob)
             pt_l.append(pt)
         if len(dyn) > n_pts:  # people: few, every pair
             rob, k = np.divmod(np.arange(len(idx) * (len(dyn) - n_pts)), len(dyn) - n_pts)
-            rob_l.append(rob)
-            pt_l.append(n_pts + k)
+            d = dyn[n_pts + k] - here[rob]
+            keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= r[rob] * r[rob]
+            rob_l.append(rob[keep])
+            pt_l.append(n_pts + k[keep])
+        if not rob_l:
+            return np.zeros(0, int), np.zeros(0, int)
         rob, pt = np.concatenate(rob_l), np.concatenate(pt_l)
-        d = dyn[pt] - here[rob]
-        keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= r[rob] * r[rob]
-        rob, pt = rob[keep], pt[keep]
+        if len(rob_l) == 1 and len(dyn) == n_pts:
+            return rob, pt  # skids only: already in (row, point) order
         order = np.lexsort((pt, rob))
         return rob[order], pt[order]
 

@@ -89,10 +89,12 @@ class MakeRoom:
         """Speeds along the axis of the settled skids (``settled``) that stand in a way."""
         n = len(view.poses)
         res = RoomResult(np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
-        corridors = self.corridors(view, settled, paths, scene)
         free = settled & ~view.stopped if view.stopped is not None else settled
         cand = np.flatnonzero(free)
-        if not corridors or not len(cand):
+        if not len(cand):
+            return res  # no settled skid to move aside: the corridors are not needed
+        corridors = self.corridors(view, settled, paths, scene)
+        if not corridors:
             for i in cand:
                 rooms[i].side = 0
             return res

@@ -87,19 +87,20 @@ class ManoeuvrePlanner:
             np.abs(wrap_angle(goal[:, 2] - pose[:, 2])),
             NAV_HEADING_LEVER_M,
         )
-        for k, i in enumerate(idx.tolist()):
+        roamed = self._roamed(pose, [states[i] for i in idx.tolist()])
+        t = view.t
+        for k, (i, ok) in enumerate(zip(idx.tolist(), np.asarray(eligible).tolist(), strict=True)):
             st = states[i]
-            if st.running() and (
-                not eligible[k] or st.goal is None or np.any(st.goal != view.goals[i])
+            if st.segments is not None and (  # running
+                not ok or st.goal is None or np.any(st.goal != view.goals[i])
             ):
-                st.stop(view.t, 0.0)
-            if not eligible[k]:
-                st.best_left_m, st.best_t = np.inf, view.t
+                st.stop(t, 0.0)
+            if not ok:
+                st.best_left_m, st.best_t = np.inf, t
                 continue
             # Progress, or travel: a skid driving round an obstacle away from its goal is
             # not stuck, one loitering within roam_m of where it last got closer is.
-            roamed = st.anchor is not None and np.hypot(*(pose[k, :2] - st.anchor)) > p.roam_m
-            if left[k] < st.best_left_m - p.progress_m or roamed or st.anchor is None:
+            if left[k] < st.best_left_m - p.progress_m or roamed[k] or st.anchor is None:
                 st.best_left_m, st.best_t = left[k], view.t
                 st.anchor = pose[k, :2].copy()
             if not st.running():
@@ -115,12 +116,24 @@ class ManoeuvrePlanner:
             out[k] = True
         return out
 
+    def _roamed(self, pose: np.ndarray, states: list[ManoeuvreState]) -> list[bool]:
+        """Per row, whether the skid is more than ``roam_m`` from its anchor (False without
+        one), for all rows at once (the same distances as one ``np.hypot`` per skid)."""
+        anchor = np.full((len(states), 2), np.nan)
+        has = [k for k, st in enumerate(states) if st.anchor is not None]
+        if not has:
+            return [False] * len(states)
+        anchor[has] = [states[k].anchor for k in has]
+        d = pose[:, :2] - anchor
+        far = np.hypot(d[:, 0], d[:, 1]) > self.params.roam_m
+        return far.tolist()
+
     def observe(self, view: ControlView, idx: np.ndarray, states, raw, safe) -> None:
         """After the monitor: a manoeuvre it held still for ``blocked_s`` is dropped."""
         p = self.params
         for k, i in enumerate(idx.tolist()):
             st = states[i]
-            if not st.running():
+            if st.segments is None:  # not running
                 continue
             held = np.any(np.abs(raw[k]) > 1e-6) and np.all(np.abs(safe[k]) < 1e-6)
             st.blocked_s = st.blocked_s + view.dt if held else 0.0

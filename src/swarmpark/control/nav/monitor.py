@@ -8,17 +8,22 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
+from swarmpark.control.nav.kernels import (
+    hits_against_skids,
+    pairs_touching,
+    rollout_corners,
+    rollout_poses,
+)
 from swarmpark.control.nav.params import MonitorParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import (
     TOUCH_TOLERANCE_M,
     convex_overlap,
+    envelope_pairs,
     footprint_corners,
-    integrate_unicycle,
     rect_disc_gap,
 )
 
@@ -50,21 +55,23 @@ def rollout(
     (:func:`~swarmpark.core.geometry.integrate_unicycle`)."""
     n_sub = max(1, int(round(times[-1] / view.dt)))
     sub_dt = times[-1] / n_sub
-    record = np.clip(np.round(times / sub_dt), 1, n_sub).astype(int)
-    v, w = view.vel[rows, 0], view.vel[rows, 1]
-    dv = view.max_accel[rows] * sub_dt
-    dw = np.inf if view.max_yaw_accel is None else view.max_yaw_accel[rows] * sub_dt
-    now = view.poses[rows]
-    pose = np.empty((len(rows), len(times), 3))
-    # np.clip's values by np.minimum(np.maximum(...)) (np.clip costs more per call than both).
-    for step in range(1, n_sub + 1):
-        v = v + np.minimum(np.maximum(v_cmd - v, -dv), dv)
-        w = w + np.minimum(np.maximum(w_cmd - w, -dw), dw)
-        now = integrate_unicycle(now, v, w, sub_dt)
-        at = np.flatnonzero(record == step)
-        if len(at):
-            pose[:, at] = now[:, None]
-    return pose
+    record = np.clip(np.round(times / sub_dt), 1, n_sub).astype(np.int64)
+    n = len(rows)
+    dv = np.broadcast_to(view.max_accel[rows] * sub_dt, (n,))
+    dw = np.full(n, np.inf) if view.max_yaw_accel is None else view.max_yaw_accel[rows] * sub_dt
+    # Compiled (kernels.rollout_poses): the same arithmetic as one numpy call per sub-step.
+    return rollout_poses(
+        np.ascontiguousarray(view.poses[rows], dtype=float),
+        np.ascontiguousarray(view.vel[rows, 0], dtype=float),
+        np.ascontiguousarray(view.vel[rows, 1], dtype=float),
+        np.ascontiguousarray(np.broadcast_to(v_cmd, (n,)), dtype=float),
+        np.ascontiguousarray(np.broadcast_to(w_cmd, (n,)), dtype=float),
+        np.ascontiguousarray(dv, dtype=float),
+        np.ascontiguousarray(np.broadcast_to(dw, (n,)), dtype=float),
+        float(sub_dt),
+        n_sub,
+        record,
+    )
 
 
 @dataclass(frozen=True)
@@ -91,6 +98,7 @@ class CollisionMonitor:
         p = params
         self.scales = np.asarray(p.scales)
         self.times = np.linspace(p.horizon_s / p.samples, p.horizon_s, p.samples)
+        self._fps, self._fps_reach = None, 0.0
 
     def check(
         self,
@@ -128,7 +136,9 @@ class CollisionMonitor:
         if straight:
             self._straight_on(view, idx, raw, out, ~safe.any(axis=1), body, scene, others, robots)
         slowed = first_safe > 0
-        blockers = [b if s else set() for b, s in zip(blockers, slowed, strict=True)]
+        for b, s in zip(blockers, slowed.tolist(), strict=True):
+            if b and not s:
+                b.clear()  # only a skid slowed down was held up by the others
         if joint and robots:
             self.joint_check(view, idx, out, body)
         return MonitorResult(out, blockers, slowed)
@@ -157,7 +167,7 @@ class CollisionMonitor:
         w_cmd = np.repeat(raw[:, 1], S)
         pose = rollout(view, np.repeat(idx, S), v_cmd, w_cmd, times).reshape(-1, 3)
         owner = np.repeat(np.arange(n_act), S * T)
-        corners = footprint_corners(pose, np.repeat(body, S * T, axis=0))
+        corners = rollout_corners(pose, np.ascontiguousarray(body, dtype=float), S * T)
         bad = self._hits_static(view, corners, scene, group=S * T)
         blockers = self._hits_skids(view, idx, corners, owner, bad, others, scene, robots)
         self._hits_people(view, corners, n_act, bad)
@@ -174,11 +184,11 @@ class CollisionMonitor:
         lo, hi = _bounds(corners)
         glo = lo.reshape(-1, group, 2).min(axis=1)
         ghi = hi.reshape(-1, group, 2).max(axis=1)
-        gi, si = scene.static.tree.query(shapely.box(glo[:, 0], glo[:, 1], ghi[:, 0], ghi[:, 1]))
+        st = scene.static
+        gi, si = envelope_pairs(glo, ghi, st.lo, st.hi, st.tree)
         if len(gi):
             qi = (gi[:, None] * group + np.arange(group)).ravel()
             si = np.repeat(si, group)
-            st = scene.static
             meet = np.all((lo[qi] <= st.hi[si]) & (hi[qi] >= st.lo[si]), axis=1)
             qi, si = qi[meet], si[meet]
             hit = convex_overlap(corners[qi], view.static_pieces[si]) > TOUCH_TOLERANCE_M
@@ -207,16 +217,22 @@ class CollisionMonitor:
         ra = np.repeat(np.arange(len(idx)), lens)
         keep = rb != idx[ra]
         ra, rb = ra[keep], rb[keep]
-        qa = (ra[:, None] * (S * T) + np.arange(S * T)).ravel()
-        qb = np.repeat(rb, S * T)
-        near = np.linalg.norm(centres[qa] - other_c[qb], axis=1) <= radius
-        qa, qb = qa[near], qb[near]
-        if len(qa):
-            hit = convex_overlap(corners[qa], others[qb]) > TOUCH_TOLERANCE_M
-            bad[qa[hit]] = True
-            full_speed = (qa // T) % S == 0
-            for a, b in zip(owner[qa[hit & full_speed]], qb[hit & full_speed], strict=True):
-                blockers[a].add(int(b))
+        # Each footprint against each candidate skid (compiled: kernels.hits_against_skids).
+        qa, qb = hits_against_skids(
+            ra.astype(np.int64),
+            rb.astype(np.int64),
+            np.ascontiguousarray(centres),
+            np.ascontiguousarray(other_c),
+            np.ascontiguousarray(corners, dtype=float),
+            np.ascontiguousarray(others, dtype=float),
+            float(radius),
+            S * T,
+            TOUCH_TOLERANCE_M,
+            bad,
+        )
+        full_speed = (qa // T) % S == 0
+        for a, b in zip(owner[qa[full_speed]].tolist(), qb[full_speed].tolist(), strict=True):
+            blockers[a].add(b)
         return blockers
 
     def _hits_people(self, view: ControlView, corners, n_act: int, bad: np.ndarray) -> None:
@@ -264,6 +280,12 @@ class CollisionMonitor:
             out[ia[hit]] = True
         return out
 
+    def _max_circumradius(self, fps) -> float:
+        """The largest circumradius of footprints ``fps``, kept while they stay the same."""
+        if fps is not self._fps:
+            self._fps, self._fps_reach = fps, max(f.circumradius_m for f in fps)
+        return self._fps_reach
+
     def joint_check(
         self, view: ControlView, idx: np.ndarray, out: np.ndarray, body: np.ndarray
     ) -> None:
@@ -277,21 +299,31 @@ class CollisionMonitor:
         """
         times = self.times
         T = len(times)
-        reach = max(f.circumradius_m for f in view.footprints) * 2.0
+        reach = self._max_circumradius(view.footprints) * 2.0
         # Two skids closing at their current speed plus their top speed over the horizon.
         speed = np.abs(view.vel[idx, 0]).max(initial=0.0) + view.max_speed[idx].max()
         pairs = cKDTree(view.poses[idx, :2]).query_pairs(
             reach + 2.0 * speed * times[-1], output_type="ndarray"
         )
-        while len(pairs):
-            pose = rollout(view, idx, out[:, 0], out[:, 1], times)
-            corners = footprint_corners(pose.reshape(-1, 3), np.repeat(body, T, axis=0))
-            corners = corners.reshape(len(idx), T, 4, 2)
-            a = np.repeat(pairs[:, 0], T)
-            b = np.repeat(pairs[:, 1], T)
-            tk = np.tile(np.arange(T), len(pairs))
-            hit = convex_overlap(corners[a, tk], corners[b, tk]) > TOUCH_TOLERANCE_M
-            bad = np.unique(pairs[hit.reshape(len(pairs), T).any(axis=1)])
+        body = np.ascontiguousarray(body, dtype=float)
+        corners, test, bad = None, pairs, np.zeros(0, dtype=int)
+        while len(test):
+            if corners is None:
+                pose = rollout(view, idx, out[:, 0], out[:, 1], times)
+                corners = rollout_corners(pose.reshape(-1, 3), body, T).reshape(len(idx), T, 4, 2)
+            else:
+                # Only the skids stopped in the last pass move differently: roll them out
+                # again, and test the pairs with one of them (the others' verdicts stand, and
+                # their skids were stopped already).
+                pose = rollout(view, idx[bad], out[bad, 0], out[bad, 1], times)
+                corners[bad] = rollout_corners(pose.reshape(-1, 3), body[bad], T).reshape(
+                    len(bad), T, 4, 2
+                )
+                moved = np.zeros(len(idx), dtype=bool)
+                moved[bad] = True
+                test = pairs[moved[pairs[:, 0]] | moved[pairs[:, 1]]]
+            hit = pairs_touching(test.astype(np.int64), corners, TOUCH_TOLERANCE_M)
+            bad = np.unique(test[hit])
             bad = bad[np.any(out[bad] != 0.0, axis=1)]
             if not len(bad):
                 return

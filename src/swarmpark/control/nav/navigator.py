@@ -103,6 +103,8 @@ class Navigator:
             back_speed_share=p.backup.speed_share,
         )
         self.robots: list[RobotNav] = []
+        self._state_key: tuple[int, int] | None = None
+        self._state_lists: dict[str, list] = {}
         #: (N,) skids standing aside for another on purpose this tick (RVO; not deadlocked).
         self.making_room = np.zeros(0, dtype=bool)
         #: (N,) skids waiting for a bottleneck this tick (queued on purpose; not deadlocked).
@@ -118,7 +120,16 @@ class Navigator:
         return [r.path.path for r in self.robots]
 
     def _states(self, name: str) -> list:
-        return [getattr(r, name) for r in self.robots]
+        """Every skid's state of one component (e.g. ``"path"``), in skid order. The state
+        objects live as long as their skid, so the lists are kept until the fleet grows (or
+        :attr:`robots` is replaced) instead of being gathered several times per tick."""
+        key = (id(self.robots), len(self.robots))
+        if key != self._state_key:
+            self._state_key, self._state_lists = key, {}
+        out = self._state_lists.get(name)
+        if out is None:
+            out = self._state_lists[name] = [getattr(r, name) for r in self.robots]
+        return out
 
     def prepare(self, view: ControlView) -> None:
         """Per-map work done before the first tick (the supervisor calls it at load): the
@@ -290,8 +301,10 @@ class Navigator:
         self.making_room = room.aside
         for i in np.flatnonzero(room.undock):
             robots[i].dock.docked = False  # dock again precisely once the way is clear
-        bump = self.ladder.step(view, settled, self._states("deadlock"), self._states("stall"))
-        backing = np.array([r.deadlock.back_out.running() for r in robots], dtype=bool)
+        ladders = self._states("deadlock")
+        bump = self.ladder.step(view, settled, ladders, self._states("stall"))
+        backs = [d.back_out for d in ladders]
+        backing = np.array([b.running() for b in backs], dtype=bool)
         backing &= ~immobile
         res = self.avoidance.step(
             view,
@@ -306,10 +319,10 @@ class Navigator:
                 aside=room.aside,
                 bump=bump,
                 side_step=np.array(
-                    [robots[i].deadlock.side_step.running(view.t) for i in cruising], dtype=bool
+                    [ladders[i].side_step.running(view.t) for i in cruising.tolist()], dtype=bool
                 ),
                 backing=backing,
-                back_dir=np.array([r.deadlock.back_out.direction for r in robots]),
+                back_dir=np.array([b.direction for b in backs]),
             ),
         )
         for i in np.flatnonzero(self.avoidance.pushed(settled, res.along)):

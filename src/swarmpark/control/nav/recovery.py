@@ -285,16 +285,27 @@ class DeadlockState:
     episode: dict | None = None
     rungs: tuple[Rung, ...] = field(default_factory=lambda: tuple(cls() for cls in RUNGS))
 
+    def __post_init__(self) -> None:
+        # The first rung of each kind, looked up once (the rungs are a fixed tuple).
+        self._rung_of: dict[type, Rung] = {}
+        for cls in RUNGS:
+            found = [r for r in self.rungs if isinstance(r, cls)]
+            if found:
+                self._rung_of[cls] = found[0]
+
     def rung(self, cls: type[Rung]) -> Rung:
-        return next(r for r in self.rungs if isinstance(r, cls))
+        r = self._rung_of.get(cls)
+        return r if r is not None else next(r for r in self.rungs if isinstance(r, cls))
 
     @property
     def back_out(self) -> BackOut:
-        return self.rung(BackOut)  # type: ignore[return-value]
+        r = self._rung_of.get(BackOut)
+        return r if r is not None else self.rung(BackOut)  # type: ignore[return-value]
 
     @property
     def side_step(self) -> SideStep:
-        return self.rung(SideStep)  # type: ignore[return-value]
+        r = self._rung_of.get(SideStep)
+        return r if r is not None else self.rung(SideStep)  # type: ignore[return-value]
 
     def stop(self) -> None:
         for r in self.rungs:
@@ -334,12 +345,15 @@ class DeadlockLadder:
         p = self.params
         bump = np.zeros(len(view.poses))
         remaining = self.remaining(view)
+        # Per-skid flags as Python bools, read once for all.
+        idle = (view.goal_changed | ~view.active | settled).tolist()
+        gone = (~view.active | settled).tolist()
         for i in range(len(view.poses)):
             st = states[i]
-            if view.goal_changed[i] or not view.active[i] or settled[i]:
+            if idle[i]:
                 st.best_remaining, st.best_t = remaining[i], view.t
                 st.stop()
-                if st.episode is not None and (not view.active[i] or settled[i]):
+                if st.episode is not None and gone[i]:
                     self._close(st, view.t)
                 continue
             if made_progress(remaining[i], st.best_remaining, p.progress_m):
@@ -355,14 +369,17 @@ class DeadlockLadder:
         return bump
 
     def _climb(self, st: DeadlockState, s: Stuck, i: int) -> None:
-        first, *later = st.rungs
+        rungs = st.rungs
+        first = rungs[0]
         if st.episode is None:
             first.start(s, self.params, self.backup)
             st.episode = {"robot": i, "start_s": round(s.view.t, 3), "actions": [first.name]}
             self.episodes.append(st.episode)
-        if any(r.holds and r.running(s.view.t) for r in st.rungs):
-            return
-        for rung in later:
+        t = s.view.t
+        for r in rungs:
+            if r.holds and r.running(t):
+                return  # a holding rung runs: no other starts
+        for rung in rungs[1:]:
             if rung.ready(s, self.params):
                 rung.start(s, self.params, self.backup)
                 st.episode["actions"].append(rung.name)
