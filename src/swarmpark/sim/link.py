@@ -109,9 +109,8 @@ class SimLink:
         # (deliver at, seq, message or a whole fleet's reports)
         self._queue: list[tuple[float, int, Message | ReportBatch]] = []
         self._seq = 0
-        self._status = [""] * n
-        self._blocked = np.zeros(n, dtype=np.int8)  # the status last reported: 1 blocked
-        self._blocked[:] = -1  # nothing reported yet
+        # The status last reported per robot: 1 blocked, 0 ok, -1 nothing reported yet.
+        self._blocked = np.full(n, -1, dtype=np.int8)
         seed = np.random.SeedSequence(world.scenario.seed)
         scan_seed, loc_seed = seed.spawn(2)
         # The odometry's stream is the one the fleet localizer used to give it (its last
@@ -256,9 +255,7 @@ class SimLink:
             heapq.heappush(self._queue, (batch.stamp, self._next_seq(), batch))
             blocked = np.zeros(n, np.int8) if step is None else step.blocked.astype(np.int8)
             for i in np.flatnonzero(blocked != self._blocked).tolist():
-                self._status[i] = "blocked" if blocked[i] else "ok"
-                self._emit(Status(self.ids[i], sim.t, self._status[i], self._next_seq()))
-            self._blocked = blocked
+                self._report_status(i, int(blocked[i]))
         if not self.sensing:
             self._emit(self._people())
 
@@ -271,11 +268,15 @@ class SimLink:
                 self._emit(PoseReport(rid, sim.t, sim.poses[i].copy(), self._next_seq()))
             if ranges is not None:
                 self._emit(Scan(rid, sim.t, ranges[i], self._next_seq()))
-            state = "blocked" if step is not None and step.blocked[i] else "ok"
-            if state != self._status[i]:
-                self._status[i] = state
-                self._blocked[i] = state == "blocked"
-                self._emit(Status(rid, sim.t, state, self._next_seq()))
+            blocked = int(step is not None and step.blocked[i])
+            if blocked != self._blocked[i]:
+                self._report_status(i, blocked)
+
+    def _report_status(self, i: int, blocked: int) -> None:
+        """Robot ``i``'s status changed: report it (1 blocked, 0 ok)."""
+        self._blocked[i] = blocked
+        state = "blocked" if blocked else "ok"
+        self._emit(Status(self.ids[i], self.sim.t, state, self._next_seq()))
 
     def _emit(self, m: Message) -> None:
         """Queue a robot's message for delivery, through the faults of its link."""

@@ -407,10 +407,8 @@ class Supervisor(CommandsMixin):
         if not self.groups:
             return
         sensing = self.sensing
-        cells = sensing.detected_cells
-        pts = self._base_grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
         for g in self.spot_watch.due(
-            self.t, self.groups, self._corners_body, pts, sensing.people.xy
+            self.t, self.groups, self._corners_body, sensing.detected_points, sensing.people.xy
         ):
             # The skids the group has now (the operator may have taken some elsewhere since).
             cmd = g.command.model_copy(update={"robots": [self.ids[i] for i in g.robots]})

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Protocol
 
-import numpy as np
 from shapely.geometry import Polygon
 from shapely.ops import unary_union
 
@@ -80,7 +79,7 @@ class SensedMap:
         The scenario's world: only its map (when the skids believe it, ``sensing.map`` unset)
         and ``believed_grid`` are read, never its obstacles or people.
     sensing
-        The skids' onboard stacks; :attr:`OnboardSensing.detected_cells` is the fleet's layer
+        The skids' onboard stacks; :meth:`OnboardSensing.detected_mask` is the fleet's layer
         after the last scans.
     """
 
@@ -94,14 +93,6 @@ class SensedMap:
         w = self.world
         return w.believed_grid if w.believed_grid is not None else w.grid
 
-    def _detected_mask(self) -> np.ndarray:
-        prior = self.prior
-        mask = np.zeros(prior.shape, dtype=bool)
-        cells = self.sensing.detected_cells
-        if len(cells):
-            mask[cells[:, 0], cells[:, 1]] = True
-        return mask
-
     def solids(self, region: Polygon):
         w, prior = self.world, self.prior
         if w.believed_grid is None and w.wall_polygons:
@@ -111,7 +102,7 @@ class SensedMap:
             parts = [prior.occupied_geometry(region)]
         # What the scans showed, and what lies behind it unseen (a crate's face is seen, not
         # its depth).
-        mask = self._detected_mask()
+        mask = self.sensing.detected_mask()
         if mask.any():
             mask |= self.sensing.shadowed_mask()
             seen = OccupancyGrid(mask, prior.resolution_m, prior.origin)
@@ -119,10 +110,5 @@ class SensedMap:
         return _union(parts)
 
     def grid(self) -> OccupancyGrid:
-        mask = self._detected_mask()
-        if not mask.any():
-            return self.prior
-        out = self.prior.copy()
-        out.occupied |= mask
-        out.unknown &= ~out.occupied
-        return out
+        mask = self.sensing.detected_mask()
+        return self.sensing.with_detections(mask) if mask.any() else self.prior

@@ -112,6 +112,8 @@ class OnboardSensing:
         #: ``(M, 2)`` (row, col) cells of ``base_grid`` in the fleet's obstacle layer after the
         #: last scans (what the park layout adds to the prior map, supervisor/known_map.py).
         self.detected_cells = np.zeros((0, 2), dtype=np.int64)
+        #: ``(M, 2)`` the same cells' centres (world frame).
+        self.detected_points = np.zeros((0, 2))
         #: Each skid's last scan (returns off other skids masked, ``nan``) and the pose it
         #: believed it took it at: what lies behind the detections (sense/shadow.py).
         self.last_scans = np.full((self.n, self.lidar_spec.num_beams), np.nan)
@@ -173,9 +175,9 @@ class OnboardSensing:
         scans[rows], poses[rows] = seen[rows], self.estimates[rows]
         self.last_scans, self.last_scan_poses = scans, poses
         cells = self.fleet_layer.merge(t)
-        self.detected_cells = cells
         grid = self._base_grid
         pts = grid.cell_to_world(cells) if len(cells) else np.zeros((0, 2))
+        self.detected_cells, self.detected_points = cells, pts
         self._track_people(t, self.costmap.unexplained_points(self.estimates, seen), pts)
         squares = np.unique(np.floor(pts / DETECTION_SQUARE_M).astype(np.int64), axis=0)
         if not np.array_equal(squares, self._detected_squares):
@@ -197,21 +199,33 @@ class OnboardSensing:
         replan = np.zeros(self.n, dtype=bool)
         if t - self._plan_grid_t >= DETECTION_PLAN_PERIOD_S - 1e-9:
             self._plan_grid_t = t
-            mask = np.zeros(grid.shape, dtype=bool)
-            if len(cells):
-                mask[cells[:, 0], cells[:, 1]] = True
+            mask = self.detected_mask()
             if not np.array_equal(mask, self._detected_mask):
                 appeared = mask & ~self._detected_mask
                 self._detected_mask = mask
-                known = grid.copy()
-                known.occupied |= mask
-                known.unknown &= ~known.occupied
-                self.known_grid = known  # a new object: the navigator rebuilds its costmap
+                # A new object: the navigator rebuilds its costmap.
+                self.known_grid = self.with_detections(mask)
                 if appeared.any() and paths is not None:
                     replan = self._blocked_paths(
                         grid.cell_to_world(np.argwhere(appeared)), has_goal, paths(), half_widths
                     )
         return replan
+
+    def detected_mask(self) -> np.ndarray:
+        """``(H, W)`` bool: the cells of the planner's base map in the fleet's obstacle layer
+        after the last scans (:attr:`detected_cells`)."""
+        mask = np.zeros(self._base_grid.shape, dtype=bool)
+        cells = self.detected_cells
+        if len(cells):
+            mask[cells[:, 0], cells[:, 1]] = True
+        return mask
+
+    def with_detections(self, mask: np.ndarray):
+        """The base map with the cells ``mask`` occupied (a new grid)."""
+        out = self._base_grid.copy()
+        out.occupied |= mask
+        out.unknown &= ~out.occupied
+        return out
 
     def shadowed_mask(self) -> np.ndarray:
         """``(H, W)`` bool cells of the planner's base map behind what the skids' last scans

@@ -299,13 +299,11 @@ class DeadlockState:
 
     @property
     def back_out(self) -> BackOut:
-        r = self._rung_of.get(BackOut)
-        return r if r is not None else self.rung(BackOut)  # type: ignore[return-value]
+        return self.rung(BackOut)  # type: ignore[return-value]
 
     @property
     def side_step(self) -> SideStep:
-        r = self._rung_of.get(SideStep)
-        return r if r is not None else self.rung(SideStep)  # type: ignore[return-value]
+        return self.rung(SideStep)  # type: ignore[return-value]
 
     def stop(self) -> None:
         for r in self.rungs:
