@@ -179,7 +179,14 @@ class ManoeuvrePlanner:
         st.planned += 1
         segments = None
         if win is not None:
-            segments = self._plan(view, i, *win)
+            # Roomy first: a manoeuvre planned at the bare margin leaves the skid, once it
+            # stops a few cm off a planned turn point, inside the monitor's margin, which
+            # then holds it there (found on perturbed suite runs: a turn in a doorway and a
+            # reverse run towards a wall, both held until the manoeuvre was dropped).
+            for grow in (p.roomy_grow_m, p.grow_m):
+                segments = self._plan(view, i, *win, grow)
+                if segments:
+                    break
         if not segments:
             st.failed += 1
             st.stop(view.t, p.retry_s)
@@ -188,7 +195,7 @@ class ManoeuvrePlanner:
         st.seg_deadline = np.inf
         st.goal = view.goals[i].copy()
 
-    def _plan(self, view: ControlView, i: int, occ, origin, res) -> list | None:
+    def _plan(self, view: ControlView, i: int, occ, origin, res, grow_m: float) -> list | None:
         """The segments of a manoeuvre from where skid ``i`` stands; a wedged skid (its
         footprint not clear at the nearest grid heading) first backs or drives straight out
         along its own heading to the nearest clear pose (found on a generated L-bay: a skid
@@ -198,7 +205,7 @@ class ManoeuvrePlanner:
         kw = {
             "speed_mps": float(view.max_speed[i]) * p.speed_share,
             "yaw_rate_radps": float(view.max_yaw_rate[i]) * p.speed_share,
-            "grow_m": p.grow_m,
+            "grow_m": grow_m,
             "reverse_cost": p.reverse_cost,
             "budget": p.budget,
         }
@@ -207,7 +214,7 @@ class ManoeuvrePlanner:
         if plan is not None and plan.start_free:
             return plan.segments() if len(plan.poses) >= 2 else None
         half = res * np.sqrt(0.5)
-        grow = p.grow_m + half
+        grow = grow_m + half
         head = np.array([np.cos(pose[2]), np.sin(pose[2]), 0.0])
         for d in np.arange(p.escape_step_m, p.escape_max_m + 1e-9, p.escape_step_m):
             for sign, kind in ((-1.0, "reverse"), (1.0, "forward")):
