@@ -89,7 +89,7 @@ def test_a_wedged_skid_first_backs_straight_out():
     view = make_view([[3.6, 3.0, 0.0]], [[1.5, 1.2, np.pi / 2]], boxes=slot)
     planner = ManoeuvrePlanner(ManoeuvreParams())
     occ, origin, res = planner._window(view, 0)
-    segments = planner._plan(view, 0, occ, origin, res)
+    segments = planner._plan(view, 0, occ, origin, res, planner.params.grow_m)
     assert segments and segments[0][0] == "reverse"
     out = segments[0][2]
     assert out[0] < 3.2 - 0.6 and abs(out[1] - 3.0) < 1e-9  # clear of the slot, same line

@@ -135,7 +135,12 @@ class ManoeuvrePlanner:
             st = states[i]
             if st.segments is None:  # not running
                 continue
-            held = np.any(np.abs(raw[k]) > 1e-6) and np.all(np.abs(safe[k]) < 1e-6)
+            # Held: its run stopped, or its turn on the spot stopped. A run stopped while a
+            # trace of its heading correction still passes is held too (found on a perturbed
+            # hallway run: 1e-4 rad/s kept a stopped reverse run "moving" for 5 s).
+            run = abs(raw[k, 0]) > 1e-6
+            moving = abs(safe[k, 0]) > 1e-6 if run else abs(safe[k, 1]) > 1e-6
+            held = (run or abs(raw[k, 1]) > 1e-6) and not moving
             st.blocked_s = st.blocked_s + view.dt if held else 0.0
             if st.blocked_s >= p.blocked_s:
                 st.stop(view.t, p.retry_s)

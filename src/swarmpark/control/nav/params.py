@@ -206,7 +206,9 @@ class ManoeuvreParams:
         _check(self, {"stuck_s": ">0", "progress_m": ">0", "window_margin_m": ">0"})
         _check(self, {"roam_m": ">0", "escape_step_m": ">0", "escape_max_m": ">=0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
-        _check(self, {"grow_m": ">=0", "roomy_grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"})
+        _check(
+            self, {"grow_m": ">=0", "roomy_grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"}
+        )
         _check(self, {"blocked_s": ">0", "retry_s": ">=0", "speed_share": "share"})
         _check(self, {"k_speed": ">0", "k_yaw": ">0", "k_lateral": ">0"})
         _check(self, {"min_speed_mps": ">0", "min_yaw_rate_radps": ">0", "done_m": ">0"})
