@@ -42,6 +42,8 @@ class ManoeuvreState:
     retry_t: float = -np.inf
     blocked_s: float = 0.0
     goal: np.ndarray | None = field(default=None, repr=False)
+    #: The last manoeuvre was held up by the monitor or overran: plan the next one roomy.
+    roomy: bool = False
     #: How many manoeuvres were planned and how many found no way (for the run report).
     planned: int = 0
     failed: int = 0
@@ -144,6 +146,7 @@ class ManoeuvrePlanner:
             st.blocked_s = st.blocked_s + view.dt if held else 0.0
             if st.blocked_s >= p.blocked_s:
                 st.stop(view.t, p.retry_s)
+                st.roomy = True
 
     # ------------------------------------------------------------------ planning
 
@@ -184,11 +187,12 @@ class ManoeuvrePlanner:
         st.planned += 1
         segments = None
         if win is not None:
-            # Roomy first: a manoeuvre planned at the bare margin leaves the skid, once it
-            # stops a few cm off a planned turn point, inside the monitor's margin, which
-            # then holds it there (found on perturbed suite runs: a turn in a doorway and a
-            # reverse run towards a wall, both held until the manoeuvre was dropped).
-            for grow in (p.roomy_grow_m, p.grow_m):
+            # A manoeuvre planned at the bare margin can leave the skid, stopped a few cm off
+            # a planned turn point, inside the monitor's margin, which then holds it there
+            # (found on a perturbed suite run: a turn in a doorway, planned again and held
+            # again for 150 s). After such a hold the next one is planned roomy first.
+            grows = (p.roomy_grow_m, p.grow_m) if st.roomy else (p.grow_m,)
+            for grow in grows:
                 segments = self._plan(view, i, *win, grow)
                 if segments:
                     break
@@ -248,6 +252,7 @@ class ManoeuvrePlanner:
         w_max = float(view.max_yaw_rate[i]) * p.speed_share
         if view.t > st.seg_deadline:
             st.stop(view.t, p.retry_s)  # the segment takes far too long: plan again later
+            st.roomy = True
             return None
         while st.seg < len(st.segments):
             kind, a, b = st.segments[st.seg]
@@ -278,6 +283,6 @@ class ManoeuvrePlanner:
                     return np.array([d * speed, np.clip(p.k_yaw * err, -w_max, w_max)])
             st.seg += 1
             st.seg_deadline = np.inf
-        st.segments, st.seg = None, 0
+        st.segments, st.seg, st.roomy = None, 0, False
         st.best_left_m, st.best_t = np.inf, view.t
         return None
