@@ -113,3 +113,24 @@ def test_budget_bounds_the_search(budget):
         budget=budget,
     )
     assert m is None
+
+
+def test_the_window_edge_counts_as_a_wall():
+    """Outside the planning window is unknown, so occupied: no planned pose may hang a corner
+    past the window's edge (the window is cut from the map; a wall may lie just beyond it).
+    Here the window has no walls at all; the skid must stay a half-width inside its edges."""
+    occ = np.zeros((int(3.0 / RES), int(6.0 / RES)), bool)
+    start, goal = np.array([1.0, 1.5, 0.0]), np.array([5.0, 1.5, np.pi / 2])
+    m = plan_manoeuvre(occ, np.zeros(2), RES, FP, start, goal, speed_mps=0.5, yaw_rate_radps=1.0)
+    assert m is not None
+    corners = footprint_corners(
+        m.poses[1:], np.repeat(FP.corners_body()[None], len(m.poses) - 1, 0)
+    )
+    assert corners.min() >= 0.0
+    assert corners[..., 0].max() <= 6.0 and corners[..., 1].max() <= 3.0
+    # A goal whose footprint would reach past the edge is refused.
+    edge = np.array([5.9, 1.5, 0.0])
+    assert (
+        plan_manoeuvre(occ, np.zeros(2), RES, FP, start, edge, speed_mps=0.5, yaw_rate_radps=1.0)
+        is None
+    )

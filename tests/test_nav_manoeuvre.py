@@ -80,6 +80,29 @@ def test_a_manoeuvre_held_still_by_the_monitor_is_dropped_and_retried_later():
         view = advance(view, np.zeros((2, 2)))
     assert t_drop is not None
     assert states[0].retry_t == t_drop + p.retry_s
+    # The next manoeuvre is planned with the roomier margin first.
+    assert states[0].roomy
+
+
+def test_a_run_stopped_while_a_trace_of_its_turn_passes_counts_as_held():
+    """The monitor stops the run but passes a 1e-4 rad/s heading correction: held."""
+    p = ManoeuvreParams(stuck_s=0.5, blocked_s=1.0)
+    planner = ManoeuvrePlanner(p)
+    states = [ManoeuvreState(), ManoeuvreState()]
+    view = make_view(
+        [[6.5, 0.8, np.pi / 2], NEIGHBOUR], [GOAL, NEIGHBOUR], boxes=[PILLAR], active=[True, False]
+    )
+    idx = np.array([0])
+    for _ in range(10):
+        planner.step(view, idx, np.zeros((1, 2)), states, np.array([True]))
+        view = advance(view, np.zeros((2, 2)))
+    assert states[0].running()
+    for _ in range(5):
+        planner.observe(view, idx, states, np.array([[0.1, 1e-4]]), np.array([[0.0, 1e-4]]))
+    assert states[0].blocked_s > 0
+    # A turn on the spot the monitor lets through is not held.
+    planner.observe(view, idx, states, np.array([[0.0, 0.3]]), np.array([[0.0, 0.3]]))
+    assert states[0].blocked_s == 0
 
 
 def test_a_wedged_skid_first_backs_straight_out():
@@ -89,7 +112,7 @@ def test_a_wedged_skid_first_backs_straight_out():
     view = make_view([[3.6, 3.0, 0.0]], [[1.5, 1.2, np.pi / 2]], boxes=slot)
     planner = ManoeuvrePlanner(ManoeuvreParams())
     occ, origin, res = planner._window(view, 0)
-    segments = planner._plan(view, 0, occ, origin, res)
+    segments = planner._plan(view, 0, occ, origin, res, planner.params.grow_m)
     assert segments and segments[0][0] == "reverse"
     out = segments[0][2]
     assert out[0] < 3.2 - 0.6 and abs(out[1] - 3.0) < 1e-9  # clear of the slot, same line

@@ -137,3 +137,30 @@ def test_a_spot_found_blocked_on_arrival_is_laid_out_again_and_the_group_parks()
     assert any(_on(parks[0]["detail"]["goals"], sup, UNSEEN))
     assert not any(_on(parks[1]["detail"]["goals"], sup, UNSEEN))
     assert res["success"] and res["collisions"] == []
+
+
+def test_a_goto_is_checked_on_the_known_map_not_the_scenarios_obstacles():
+    """With sensing on, a goto is judged on what the operator knows, as a park is: the crate no
+    scan has seen is not known (the goto is taken), the seen one is refused with the reason,
+    and a refused goto leaves the skid on its previous order."""
+    sup = Supervisor(build_world(_scenario(park_at=30.0)))
+    on_unseen = sup.command("goto", {"robot": "a2", "pose": [12.5, 3.7, 90]})
+    assert on_unseen.accepted, on_unseen
+    ok = sup.command("goto", {"robot": "a1", "pose": [3.0, 2.0, 0]})
+    assert ok.accepted
+    before = sup.command("goto", {"robot": "a1", "pose": [5.1, 3.9, 90]})
+    assert before.accepted  # no scan yet: the map alone does not show the crate
+    sup.command("goto", {"robot": "a1", "pose": [3.0, 2.0, 0]})
+    _run_until(sup, 1.0)
+    out = sup.command("goto", {"robot": "a1", "pose": [5.1, 3.9, 90]})
+    assert not out.accepted
+    assert out.reason == (
+        "goto.pose: robot 'a1' would overlap a wall or a detected obstacle of the known map "
+        "at [5.1, 3.9, 90.0]"
+    )
+    np.testing.assert_allclose(sup.goals[0], [3.0, 2.0, 0.0])
+    wall = sup.command("goto", {"robot": "a1", "pose": [8.0, 7.5, 0]})
+    assert not wall.accepted and "overlap a wall" in wall.reason
+    off = sup.command("goto", {"robot": "a1", "pose": [15.9, 4.0, 0]})
+    assert not off.accepted
+    assert off.reason == "goto.pose: robot 'a1' would reach outside the map at [15.9, 4.0, 0.0]"

@@ -317,10 +317,15 @@ class CommandsMixin:
         return self._accept("goto", robot=cmd.robot, pose=np.round(goal, 4).tolist())
 
     def _goal_reachability(self, i: int, goal: np.ndarray) -> str:
-        """Reason a goal pose cannot be taken (footprint in a wall or off the map), or ''."""
+        """Reason a goal pose cannot be taken (footprint in a wall or off the map), or ''.
+        With onboard sensing it is judged on what the operator knows (:attr:`park_map`: the
+        prior map and the detections), as the park's layout is, never the scenario's
+        obstacles."""
         from swarmpark.core.geometry import convex_gap, footprint_corners
 
         corners = footprint_corners(goal[None], self._corners_body[i : i + 1])
+        if self.sensing is not None:
+            return self._goal_on_known_map(i, goal, corners[0])
         pieces = self._static_pieces
         gap = convex_gap(np.repeat(corners, len(pieces), axis=0), pieces)
         if np.any(gap < 0):
@@ -333,6 +338,24 @@ class CommandsMixin:
             return (
                 f"goto.pose: robot {self.ids[i]!r} would be in an occupied cell of the map or "
                 f"outside it at {[round(float(v), 3) for v in goal[:2]]}"
+            )
+        return ""
+
+    def _goal_on_known_map(self, i: int, goal: np.ndarray, corners: np.ndarray) -> str:
+        """:meth:`_goal_reachability` on the sensed map (footprint ``corners`` at ``goal``)."""
+        where = [round(float(goal[0]), 3), round(float(goal[1]), 3)]
+        where.append(round(float(np.rad2deg(goal[2])), 1))
+        known = self.park_map
+        prior = known.prior
+        lo, hi = prior.origin, prior.origin + np.array(prior.shape[::-1]) * prior.resolution_m
+        if np.any(corners < lo) or np.any(corners > hi):
+            return f"goto.pose: robot {self.ids[i]!r} would reach outside the map at {where}"
+        body = Polygon(corners)
+        solids = known.solids(body)
+        if solids is not None and solids.intersection(body).area > 1e-6:
+            return (
+                f"goto.pose: robot {self.ids[i]!r} would overlap a wall or a detected obstacle "
+                f"of the known map at {where}"
             )
         return ""
 
