@@ -31,6 +31,21 @@ def _drive(params, start, steps=900):
     return view, states[0], trace
 
 
+def _running(p):
+    """A planner whose skid 0 (stuck below the pillar) is running a manoeuvre after 0.5 s."""
+    planner = ManoeuvrePlanner(p)
+    states = [ManoeuvreState(), ManoeuvreState()]
+    view = make_view(
+        [[6.5, 0.8, np.pi / 2], NEIGHBOUR], [GOAL, NEIGHBOUR], boxes=[PILLAR], active=[True, False]
+    )
+    idx = np.array([0])
+    for _ in range(10):
+        planner.step(view, idx, np.zeros((1, 2)), states, np.array([True]))
+        view = advance(view, np.zeros((2, 2)))
+    assert states[0].running()
+    return planner, states, view, idx
+
+
 def test_a_stuck_skid_manoeuvres_into_its_spot():
     p = ManoeuvreParams()
     view, st, trace = _drive(p, np.array([6.5, 0.8, np.pi / 2]))
@@ -45,16 +60,7 @@ def test_a_stuck_skid_manoeuvres_into_its_spot():
 
 def test_a_manoeuvre_ends_when_the_skid_is_no_longer_eligible():
     p = ManoeuvreParams(stuck_s=0.5)
-    planner = ManoeuvrePlanner(p)
-    states = [ManoeuvreState(), ManoeuvreState()]
-    view = make_view(
-        [[6.5, 0.8, np.pi / 2], NEIGHBOUR], [GOAL, NEIGHBOUR], boxes=[PILLAR], active=[True, False]
-    )
-    idx = np.array([0])
-    for _ in range(10):
-        planner.step(view, idx, np.zeros((1, 2)), states, np.array([True]))
-        view = advance(view, np.zeros((2, 2)))
-    assert states[0].running()
+    planner, states, view, idx = _running(p)
     raw = np.array([[0.3, 0.1]])
     out = planner.step(view, idx, raw, states, np.array([False]))  # e.g. held by the fill order
     assert not states[0].running() and not out.any()
@@ -87,16 +93,7 @@ def test_a_manoeuvre_held_still_by_the_monitor_is_dropped_and_retried_later():
 def test_a_run_stopped_while_a_trace_of_its_turn_passes_counts_as_held():
     """The monitor stops the run but passes a 1e-4 rad/s heading correction: held."""
     p = ManoeuvreParams(stuck_s=0.5, blocked_s=1.0)
-    planner = ManoeuvrePlanner(p)
-    states = [ManoeuvreState(), ManoeuvreState()]
-    view = make_view(
-        [[6.5, 0.8, np.pi / 2], NEIGHBOUR], [GOAL, NEIGHBOUR], boxes=[PILLAR], active=[True, False]
-    )
-    idx = np.array([0])
-    for _ in range(10):
-        planner.step(view, idx, np.zeros((1, 2)), states, np.array([True]))
-        view = advance(view, np.zeros((2, 2)))
-    assert states[0].running()
+    planner, states, view, idx = _running(p)
     for _ in range(5):
         planner.observe(view, idx, states, np.array([[0.1, 1e-4]]), np.array([[0.0, 1e-4]]))
     assert states[0].blocked_s > 0
