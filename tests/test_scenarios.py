@@ -72,6 +72,25 @@ def test_formation_transit_from_perturbed_starts(seed):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize(("name", "seed"), [("hallway-side-room-fig7", 4), ("elevator", 3)])
+def test_perturbed_runs_that_needed_a_manoeuvre_park(name, seed):
+    """Two runs of the perturbed suite (sweeps/suite-perturbed.yaml) that end in a manoeuvre:
+    a reverse run the lattice once planned into a wall just past its window (hallway), and a
+    turn in a doorway the monitor held every time it was planned again (elevator). Both park,
+    without contact."""
+    import yaml
+
+    from swarmpark.world.scenario import parse_scenario
+
+    data = yaml.safe_load((ROOT / f"{name}.yaml").read_text())
+    data["seed"] = seed
+    data["perturb"] = {"start_m": 0.2, "start_deg": 10, "shuffle": True}
+    r = run_world(build_world(parse_scenario(data, base_dir=ROOT))).result
+    assert r["success"], [k for k, v in r["robots"].items() if not v["parked"]]
+    assert r["collisions"] == []
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("leaves", [True, False])
 def test_person_blocking_a_formation_holds_it_once(leaves):
     """formation-person-blocks: the blocked group is held ("unresolved" reported once, not
