@@ -97,8 +97,6 @@ class Simulator:
         self.people = list(world.people)
         self.person_s = np.zeros(len(self.people))
         self.person_radius = np.array([p.radius_m for p in self.people])
-        self.person_reacts = np.array([p.reacts for p in self.people], dtype=bool)
-        self.person_held = np.zeros(len(self.people), dtype=bool)
         self.reaction = PeopleReaction(self.people)
 
         # Static solids: convex pieces, with an STR-tree over their bounding boxes.
@@ -235,10 +233,10 @@ class Simulator:
     def _people_react(self, new_s: np.ndarray) -> np.ndarray:
         """Walked distances ``new_s`` after the people who react have reacted to the skids
         where they stand now (:mod:`swarmpark.sim.people`)."""
-        if not self.person_reacts.any():
+        if not self.reaction.reacts.any():
             return new_s
         centers = pivot_to_center(self.poses, self.center_offset)
-        out = self.reaction.step(
+        return self.reaction.step(
             self.person_s,
             new_s,
             self.dt,
@@ -247,8 +245,11 @@ class Simulator:
             self.circumradius,
             self.vel[:, 0],
         )
-        self.person_held = self.reaction.pace <= 0.0
-        return out
+
+    @property
+    def person_held(self) -> np.ndarray:
+        """``(P,)`` the people who stood or backed off the last step for a skid in their way."""
+        return self.reaction.pace <= 0.0
 
     def _people_progress(self, dt: float) -> np.ndarray:
         if not self.people:

@@ -324,15 +324,17 @@ class CommandsMixin:
         from swarmpark.core.geometry import convex_gap, footprint_corners
 
         corners = footprint_corners(goal[None], self._corners_body[i : i + 1])
+        where = [round(float(goal[0]), 3), round(float(goal[1]), 3)]
+        where.append(round(float(np.rad2deg(goal[2])), 1))
         if self.sensing is not None:
-            return self._goal_on_known_map(i, goal, corners[0])
+            return self._goal_on_known_map(i, where, corners[0])
         pieces = self._static_pieces
         gap = convex_gap(np.repeat(corners, len(pieces), axis=0), pieces)
         if np.any(gap < 0):
             owner = self._static_owner[int(np.argmin(gap))]
             return (
                 f"goto.pose: robot {self.ids[i]!r} would overlap {owner.replace(':', ' ')} at "
-                f"{[round(float(goal[0]), 3), round(float(goal[1]), 3), round(float(np.rad2deg(goal[2])), 1)]}"
+                f"{where}"
             )
         if self.world.off_map_or_in_cells(corners)[0]:
             return (
@@ -341,14 +343,12 @@ class CommandsMixin:
             )
         return ""
 
-    def _goal_on_known_map(self, i: int, goal: np.ndarray, corners: np.ndarray) -> str:
-        """:meth:`_goal_reachability` on the sensed map (footprint ``corners`` at ``goal``)."""
-        where = [round(float(goal[0]), 3), round(float(goal[1]), 3)]
-        where.append(round(float(np.rad2deg(goal[2])), 1))
+    def _goal_on_known_map(self, i: int, where: list, corners: np.ndarray) -> str:
+        """:meth:`_goal_reachability` on the sensed map (footprint ``corners`` at the goal
+        ``where``, rounded, in degrees)."""
         known = self.park_map
-        prior = known.prior
-        lo, hi = prior.origin, prior.origin + np.array(prior.shape[::-1]) * prior.resolution_m
-        if np.any(corners < lo) or np.any(corners > hi):
+        xmin, ymin, xmax, ymax = known.prior.bounds
+        if np.any(corners < (xmin, ymin)) or np.any(corners > (xmax, ymax)):
             return f"goto.pose: robot {self.ids[i]!r} would reach outside the map at {where}"
         body = Polygon(corners)
         solids = known.solids(body)
