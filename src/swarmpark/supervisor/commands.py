@@ -84,6 +84,8 @@ class ParkGroup:
     goal_dims: tuple[tuple[float, float], ...] = ()
     #: The grid the fill-order holds are judged on (:func:`.fill_order.reach_grid`).
     reach: Reach | None = None
+    #: The last holds of :func:`.fill_order.held` and what they were worked out from.
+    hold_memo: tuple | None = None
     switches: int = 0
     #: The park command that made it (to lay it out again, :mod:`.spot_watch`).
     command: ParkCmd | None = None

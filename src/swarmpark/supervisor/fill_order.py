@@ -114,7 +114,7 @@ def held_goals(reach: Reach, filled: np.ndarray, to_go: np.ndarray) -> np.ndarra
 
     The spots already ``filled`` are taken. The others are taken one by one in the order
     their skids will get there (``to_go``, nearest first, then by index): a spot is taken if
-    taking it leaves every spot not yet taken whose skid is no nearer than its own connected
+    taking it leaves every spot not yet taken whose skid comes after its own connected
     to the outside (as it was before), else it is held and left free. A skid may follow the
     one bound deeper; it must not overtake it, and two skids must not close a spot between
     them together.
@@ -136,12 +136,13 @@ def held_goals(reach: Reach, filled: np.ndarray, to_go: np.ndarray) -> np.ndarra
     hold = np.zeros(n, dtype=bool)
     taken = filled.copy()
     space = reach.free & ~np.any(reach.masks[taken], axis=0)
+    order = np.lexsort((np.arange(n), to_go))
     bound = np.isfinite(to_go)
-    for k in np.lexsort((np.arange(n), to_go)):
+    for pos, k in enumerate(order):
         if taken[k] or not bound[k]:
             continue
-        # The spots still to be reached, by skids no nearer than k's.
-        rest = np.flatnonzero(~taken & bound & (to_go >= to_go[k]) & (np.arange(n) != k))
+        # The spots still to be reached, by the skids after k's in that order.
+        rest = np.array([j for j in order[pos + 1 :] if bound[j] and not taken[j]], dtype=int)
         trial = space & ~reach.masks[k]
         if len(rest):
             before = reach.reachable(space, rest)
@@ -161,7 +162,8 @@ def held(groups, poses: np.ndarray) -> np.ndarray:
     ----------
     groups
         Parking groups, each with ``robots`` (indices), ``goals`` ``(G, 3)``, ``goal_of``
-        (goal index per robot) and ``reach`` (from :func:`reach_grid`, or ``None``).
+        (goal index per robot), ``reach`` (from :func:`reach_grid`, or ``None``) and
+        ``hold_memo`` (the last holds worked out, kept here).
     poses
         ``(N, 3)`` the poses the fleet decides from (estimates with onboard localization).
     """
@@ -175,6 +177,10 @@ def held(groups, poses: np.ndarray) -> np.ndarray:
         filled[g.goal_of[parked]] = True
         to_go = np.full(len(g.goals), np.inf)
         to_go[g.goal_of] = pos_err
-        goal_held = held_goals(g.reach, filled, to_go)
-        hold[g.robots] = goal_held[g.goal_of]
+        # The holds depend on the filled spots and the skids' order only: worked out again
+        # when either changes, not every tick.
+        key = (filled.tobytes(), np.lexsort((np.arange(len(to_go)), to_go)).tobytes())
+        if g.hold_memo is None or g.hold_memo[0] != key:
+            g.hold_memo = (key, held_goals(g.reach, filled, to_go))
+        hold[g.robots] = g.hold_memo[1][g.goal_of]
     return hold
