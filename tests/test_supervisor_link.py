@@ -203,7 +203,7 @@ def test_two_skids_may_not_close_a_spot_between_them():
     poses[1] = [7.0, 10.0, 0.0]
     poses[4] = [12.0, 7.0, 0.0]
     assert fill_order.held([group], poses).tolist() == [False, False, False, False, True]
-    # A group of one, or no grid, holds nobody.
+    # A group of one gets no grid: nobody in it is held.
     assert fill_order.reach_grid(goals[:1], fps[:1], boundary, grid) is None
 
 
