@@ -138,24 +138,28 @@ def _dead_end():
     return grid, fps, goals, boundary
 
 
-def _group(goals, fps, boundary, grid, goal_of=None):
-    n = len(goals)
-    return ParkGroup(
-        robots=np.arange(n),
-        goals=goals,
-        cost="euclidean",
-        goal_of=np.arange(n) if goal_of is None else np.asarray(goal_of),
-        fill_order=tuple(range(n)),
-        boundary=boundary,
-        method="stacking",
-        report={},
-        reach=fill_order.reach_grid(goals, fps, boundary, grid),
-    )
+def test_blockers_of_a_dead_end_are_the_goals_deeper_in():
+    grid, fps, goals, boundary = _dead_end()
+    blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
+    # The goal at the mouth walls in both deeper ones; the middle one the deepest; the
+    # deepest blocks nothing.
+    assert blocks == ((), (0,), (0, 1))
 
 
 def test_fill_order_holds_a_skid_that_would_overtake_the_one_bound_deeper():
     grid, fps, goals, boundary = _dead_end()
-    group = _group(goals, fps, boundary, grid)
+    blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
+    group = ParkGroup(
+        robots=np.array([0, 1, 2]),
+        goals=goals,
+        cost="euclidean",
+        goal_of=np.array([0, 1, 2]),
+        fill_order=(0, 1, 2),
+        boundary=boundary,
+        method="stacking",
+        report={},
+        blocks=blocks,
+    )
     # Robot 0 (deepest goal) is far behind; robots 1 and 2 are nearer their goals: held.
     poses = np.array([[-3.0, 2.6, 0.0], [1.0, 2.6, 0.0], [2.0, 2.6, 0.0]])
     assert fill_order.held([group], poses).tolist() == [False, True, True]
@@ -165,46 +169,6 @@ def test_fill_order_holds_a_skid_that_would_overtake_the_one_bound_deeper():
     # Both deeper goals filled: the mouth is free to take.
     poses[:2] = goals[:2]
     assert fill_order.held([group], poses).tolist() == [False, False, False]
-
-
-def _cross():
-    """Five spots on an open floor: a middle one (0) with a neighbour on each side, 0.2 m
-    apart (a skid 0.6 m wide cannot pass between two of them)."""
-    grid = grid_from_walls((14.0, 14.0), 0.05, [])
-    fps = [Footprint(1.0, 0.6, 0.5)] * 5
-    goals = np.array(
-        [[7.0, 7.0, 0.0], [7.0, 7.8, 0.0], [7.0, 6.2, 0.0], [5.8, 7.0, 0.0], [8.2, 7.0, 0.0]]
-    )
-    return grid, fps, goals, box(5.0, 5.5, 9.0, 8.5)
-
-
-def test_the_last_open_side_of_a_spot_is_held_until_its_skid_is_ahead():
-    grid, fps, goals, boundary = _cross()
-    group = _group(goals, fps, boundary, grid)
-    # North, south and west are filled; the east skid is nearer its spot than the middle
-    # one is to its own, so it would wall the middle spot in: held.
-    poses = goals.copy()
-    poses[0] = [1.0, 7.0, 0.0]
-    poses[4] = [11.0, 7.0, 0.0]
-    assert fill_order.held([group], poses).tolist() == [False, False, False, False, True]
-    # Once the middle skid is nearer its spot than the east one, the east one may follow.
-    poses[0] = [5.0, 4.0, 0.0]
-    poses[4] = [12.0, 7.0, 0.0]
-    assert fill_order.held([group], poses).tolist() == [False] * 5
-
-
-def test_two_skids_may_not_close_a_spot_between_them():
-    grid, fps, goals, boundary = _cross()
-    group = _group(goals, fps, boundary, grid)
-    # South and west are filled. North or east alone leaves the middle spot a way in, both
-    # together close it: the nearer skid (north) goes, the other waits.
-    poses = goals.copy()
-    poses[0] = [1.0, 1.0, 0.0]
-    poses[1] = [7.0, 10.0, 0.0]
-    poses[4] = [12.0, 7.0, 0.0]
-    assert fill_order.held([group], poses).tolist() == [False, False, False, False, True]
-    # A group of one gets no grid: nobody in it is held.
-    assert fill_order.reach_grid(goals[:1], fps[:1], boundary, grid) is None
 
 
 # ----------------------------------------------------------------------------- commands

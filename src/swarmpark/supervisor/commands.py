@@ -23,8 +23,6 @@ from swarmpark.core.geometry import GeometryError, as_simple_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 from swarmpark.plan.spot_reach import as_report, spot_reach
-from swarmpark.supervisor import fill_order
-from swarmpark.supervisor.fill_order import Reach
 from swarmpark.supervisor.known_map import KnownMap, OperatorMap, SensedMap
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
@@ -82,10 +80,8 @@ class ParkGroup:
     report: dict
     #: (length, width) of the footprint each goal was laid out for.
     goal_dims: tuple[tuple[float, float], ...] = ()
-    #: The grid the fill-order holds are judged on (:func:`.fill_order.reach_grid`).
-    reach: Reach | None = None
-    #: The last holds of :func:`.fill_order.held` and what they were worked out from.
-    hold_memo: tuple | None = None
+    #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
+    blocks: tuple[tuple[int, ...], ...] = ()
     switches: int = 0
     #: The park command that made it (to lay it out again, :mod:`.spot_watch`).
     command: ParkCmd | None = None
@@ -189,7 +185,7 @@ class CommandsMixin:
         return self.apply_park(self.prepare_park(cmd, check_reach=False))
 
     def prepare_park(self, cmd: ParkCmd, *, check_reach: bool = True) -> ParkPlan | str:
-        """The heavy half of :meth:`park` (layout, costs, the fill order's grid, the lower
+        """The heavy half of :meth:`park` (layout, costs, fill-order blockers, the lower
         bound, with ``check_reach`` the spots no manoeuvre reaches): reads the supervisor,
         changes nothing, so a server can run it off its sim thread. Returns the plan or the
         reason it cannot be made."""
@@ -220,7 +216,7 @@ class CommandsMixin:
             lay.method,
             report,
             goal_dims=tuple((f.length_m, f.width_m) for f in fps),
-            reach=fill_order.reach_grid(goals, fps, boundary, self.known_grid),
+            blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
             command=cmd,
         )
         bound_inputs = (

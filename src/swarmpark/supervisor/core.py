@@ -109,8 +109,6 @@ class Supervisor(CommandsMixin):
         self._teleop_t = np.full(n, -np.inf)
         self.goal_changed = np.zeros(n, dtype=bool)
         self.groups: list[ParkGroup] = []
-        self._held_key: tuple | None = None
-        self._held = np.zeros(n, dtype=bool)
         self.formations: list = []
         self.outcomes: list[Outcome] = []
         self._corners_body = body_corners(list(self.info.footprints))
@@ -224,17 +222,13 @@ class Supervisor(CommandsMixin):
 
     # ------------------------------------------------------------------ fill order
 
+    def _blockers(self, goals: np.ndarray, fps, boundary, order) -> tuple[tuple[int, ...], ...]:
+        """Fill-order holds of a new group on the planning map (:func:`.fill_order.blockers`)."""
+        return fill_order.blockers(goals, fps, boundary, order, self.known_grid)
+
     def held(self) -> np.ndarray:
-        """Robots that must wait outside their boundary (:func:`.fill_order.held`), worked
-        out once per state of the groups and the poses (the view and the reports ask)."""
-        key = (
-            self.t,
-            self.poses_known.tobytes(),
-            tuple((id(g), g.goal_of.tobytes()) for g in self.groups),
-        )
-        if self._held_key != key:
-            self._held_key, self._held = key, fill_order.held(self.groups, self.poses_known)
-        return self._held
+        """Robots that must wait outside their boundary (:func:`.fill_order.held`)."""
+        return fill_order.held(self.groups, self.poses_known)
 
     # ------------------------------------------------------------------ the tick
 

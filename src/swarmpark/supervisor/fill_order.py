@@ -1,22 +1,15 @@
-"""Fill order of a parking group: which skids must wait so that no spot is walled in.
+"""Fill order of a parking group: which goal must stay free until which others are filled.
 
 A skid that parks at the mouth of a dead end before the skids bound deeper would wall them
-in (2018 paper, Fig. 6: deepest goals first). The layout gives a deepest-first fill order,
-but the skids do not arrive in it, and a spot can be walled in by two neighbours together
-that neither walls in alone (a spot in the middle of a block, its last two open sides
-filled at once). So the holds are decided from the state of the park, not once:
-:func:`reach_grid` prepares, once per park command, the free space around the boundary and
-every spot's cells on a coarse grid; :func:`held` then plays the filling forward from the
-spots already filled, skid by skid in the order they will get there (nearest first), and
-holds a skid whose spot would cut off a spot whose skid is not ahead of it.
+in (2018 paper, Fig. 6: deepest goals first). :func:`blockers` works out, once per park
+command, for every goal the goals it would cut off; :func:`held` decides every tick which
+skids must wait outside their boundary because of that.
 
 Both are functions of their inputs (a grid, goals, footprints; the group's robots and their
 pose estimates), testable without a simulator.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 import shapely
@@ -25,15 +18,7 @@ from shapely.geometry import Polygon
 from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 
-__all__ = [
-    "Reach",
-    "reach_grid",
-    "held",
-    "held_goals",
-    "BLOCKING_RESOLUTION_M",
-    "BLOCKING_MAX_GOALS",
-    "BLOCKING_CROP_M",
-]
+__all__ = ["blockers", "held", "BLOCKING_RESOLUTION_M", "BLOCKING_MAX_GOALS", "BLOCKING_CROP_M"]
 
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
@@ -41,34 +26,17 @@ BLOCKING_MAX_GOALS = 40
 BLOCKING_CROP_M = 3.0
 
 
-@dataclass(frozen=True)
-class Reach:
-    """The coarse grid a group's holds are judged on (see :func:`reach_grid`)."""
+def blockers(
+    goals: np.ndarray, fps, boundary: Polygon, fill_order, grid: OccupancyGrid
+) -> tuple[tuple[int, ...], ...]:
+    """For each goal k, the goals j filled before k (in the layout's fill order) that can be
+    reached from outside the boundary with the goals before j occupied, but not once k is
+    occupied as well: k must stay free until those are filled.
 
-    #: ``(H, W)`` cells a disc one skid wide can stand on (walls and obstacles eroded).
-    free: np.ndarray
-    #: ``(G, H, W)`` the cells each goal's skid takes from that disc (footprint grown by it).
-    masks: np.ndarray
-    #: ``(H, W)`` free cells outside the boundary, where the skids come from.
-    seeds: np.ndarray
-    #: ``(G, 2)`` (row, column) of each goal's centre.
-    centres: np.ndarray
-
-    def reachable(self, space: np.ndarray, goals) -> np.ndarray:
-        """Whether each of ``goals`` is connected to the outside in ``space``."""
-        from scipy import ndimage
-
-        labels, _ = ndimage.label(space, structure=np.ones((3, 3)))
-        outside = np.unique(labels[self.seeds & space])
-        lab = labels[self.centres[goals, 0], self.centres[goals, 1]]
-        return (lab > 0) & np.isin(lab, outside)
-
-
-def reach_grid(goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -> Reach | None:
-    """The free space around ``boundary`` for a disc one skid wide, and each goal's cells, on
-    a coarse grid (:data:`BLOCKING_RESOLUTION_M`) cropped :data:`BLOCKING_CROP_M` around the
-    boundary. Groups of one goal, or of more than :data:`BLOCKING_MAX_GOALS` (each hold test
-    labels the grid once per goal), get none: nobody is held.
+    Reachability is connectivity of the free space of ``grid`` for a disc one skid wide, on a
+    coarse grid cropped around the boundary (scipy.ndimage.label), seeded outside the
+    boundary. Groups of one goal, or of more than :data:`BLOCKING_MAX_GOALS` (the test is
+    quadratic), get no holds.
 
     Parameters
     ----------
@@ -78,6 +46,8 @@ def reach_grid(goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -
         The footprint laid out at each goal.
     boundary
         The parking boundary.
+    fill_order
+        Goal indices in the order they should be filled (the layout's).
     grid
         The map the skids plan in.
     """
@@ -87,7 +57,7 @@ def reach_grid(goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -
 
     n = len(goals)
     if n < 2 or n > BLOCKING_MAX_GOALS:
-        return None
+        return tuple(() for _ in goals)
     half = max(f.width_m for f in fps) / 2
     res = max(grid.resolution_m, BLOCKING_RESOLUTION_M)
     xmin, ymin, xmax, ymax = boundary.buffer(BLOCKING_CROP_M).bounds
@@ -100,87 +70,54 @@ def reach_grid(goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -
     occ = grid.is_occupied(pts).reshape(X.shape)
     free = ndimage.distance_transform_edt(~occ) * res > half
     polys = [footprint_polygon(g, f) for g, f in zip(goals, fps, strict=True)]
-    masks = np.stack([shapely.contains_xy(poly.buffer(half - 1e-6), X, Y) for poly in polys])
+    masks = [shapely.contains_xy(poly.buffer(half - 1e-6), X, Y) for poly in polys]
     seeds = ~shapely.contains_xy(boundary.buffer(res), X, Y) & free
-    centres = np.array([list(p.centroid.coords)[0] for p in polys])
-    rows = np.clip(((centres[:, 1] - ymin) / res).astype(int), 0, len(ys) - 1)
-    cols = np.clip(((centres[:, 0] - xmin) / res).astype(int), 0, len(xs) - 1)
-    return Reach(free, masks, seeds, np.column_stack([rows, cols]))
+    centers = np.array([list(p.centroid.coords)[0] for p in polys])
+    cj = np.clip(((centers[:, 1] - ymin) / res).astype(int), 0, len(ys) - 1)
+    ci = np.clip(((centers[:, 0] - xmin) / res).astype(int), 0, len(xs) - 1)
+    rank = {g: r for r, g in enumerate(fill_order)}
+    order = sorted(range(n), key=lambda g: rank.get(g, n))
 
+    def reachable(space: np.ndarray, j: int) -> bool:
+        labels, _ = ndimage.label(space, structure=np.ones((3, 3)))
+        lab = labels[cj[j], ci[j]]
+        return bool(lab) and bool(np.any(labels[seeds & space] == lab))
 
-def held_goals(reach: Reach, filled: np.ndarray, to_go: np.ndarray) -> np.ndarray:
-    """The goals whose skids must wait: play the filling forward and hold each spot that would
-    cut a spot still to be filled off the outside, unless that spot's skid is ahead.
-
-    The spots already ``filled`` are taken. The others are taken one by one in the order
-    their skids will get there (``to_go``, nearest first, then by index): a spot is taken if
-    taking it leaves every spot not yet taken whose skid comes after its own connected
-    to the outside (as it was before), else it is held and left free. A skid may follow the
-    one bound deeper; it must not overtake it, and two skids must not close a spot between
-    them together.
-
-    Parameters
-    ----------
-    reach
-        The group's grid (:func:`reach_grid`).
-    filled
-        ``(G,)`` goals with their skid parked on them.
-    to_go
-        ``(G,)`` distance of each goal's skid to it (``inf`` for a goal no skid is bound for).
-
-    Returns
-    -------
-    ``(G,)`` bool: goals whose skid is held.
-    """
-    n = len(filled)
-    hold = np.zeros(n, dtype=bool)
-    taken = filled.copy()
-    space = reach.free & ~np.any(reach.masks[taken], axis=0)
-    order = np.lexsort((np.arange(n), to_go))
-    bound = np.isfinite(to_go)
-    for pos, k in enumerate(order):
-        if taken[k] or not bound[k]:
-            continue
-        # The spots still to be reached, by the skids after k's in that order.
-        rest = np.array([j for j in order[pos + 1 :] if bound[j] and not taken[j]], dtype=int)
-        trial = space & ~reach.masks[k]
-        if len(rest):
-            before = reach.reachable(space, rest)
-            after = reach.reachable(trial, rest[before]) if before.any() else before[:0]
-            if not after.all():
-                hold[k] = True
-                continue
-        taken[k] = True
-        space = trial
-    return hold
+    blocks: list[set[int]] = [set() for _ in range(n)]
+    occupied = np.zeros(X.shape, dtype=bool)
+    for pos, j in enumerate(order):
+        base = free & ~occupied
+        if reachable(base, j):
+            for k in order[pos + 1 :]:
+                if not reachable(base & ~masks[k], j):
+                    blocks[k].add(j)
+        occupied |= masks[j]
+    return tuple(tuple(sorted(b)) for b in blocks)
 
 
 def held(groups, poses: np.ndarray) -> np.ndarray:
-    """Robots that must wait outside their boundary (:func:`held_goals` of each group).
+    """Robots that must wait outside their boundary: their goal would block a deeper goal
+    that is not filled yet and whose skid is not ahead of them (deepest goals first, 2018
+    Fig. 6). A skid may follow the one bound deeper; it must not overtake it.
 
     Parameters
     ----------
     groups
         Parking groups, each with ``robots`` (indices), ``goals`` ``(G, 3)``, ``goal_of``
-        (goal index per robot), ``reach`` (from :func:`reach_grid`, or ``None``) and
-        ``hold_memo`` (the last holds worked out, kept here).
+        (goal index per robot) and ``blocks`` (from :func:`blockers`).
     poses
         ``(N, 3)`` the poses the fleet decides from (estimates with onboard localization).
     """
     hold = np.zeros(len(poses), dtype=bool)
     for g in groups:
-        if g.reach is None or len(g.robots) < 2:
+        if not g.blocks or not any(g.blocks):
             continue
         pos_err, head_err = goal_errors(poses[g.robots], g.goals[g.goal_of])
         parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
         filled = np.zeros(len(g.goals), dtype=bool)
         filled[g.goal_of[parked]] = True
-        to_go = np.full(len(g.goals), np.inf)
+        to_go = np.full(len(g.goals), np.inf)  # distance of each goal's skid to it
         to_go[g.goal_of] = pos_err
-        # The holds depend on the filled spots and the skids' order only: worked out again
-        # when either changes, not every tick.
-        key = (filled.tobytes(), np.lexsort((np.arange(len(to_go)), to_go)).tobytes())
-        if g.hold_memo is None or g.hold_memo[0] != key:
-            g.hold_memo = (key, held_goals(g.reach, filled, to_go))
-        hold[g.robots] = g.hold_memo[1][g.goal_of]
+        for r, k, d in zip(g.robots, g.goal_of, pos_err, strict=True):
+            hold[r] = any(not filled[j] and to_go[j] >= d for j in g.blocks[k])
     return hold
