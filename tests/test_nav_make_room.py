@@ -1,11 +1,12 @@
 """Making room on hand-built views: a parked skid in another's corridor moves aside along its
-axis to the nearer free side (not into a wall), keeps that side, and skids out of the way stay."""
+axis to the nearer free side (not into a wall), keeps that side, and skids out of the way stay;
+a skid pushed past a spot filled since is cut off from its own."""
 
 import numpy as np
 from navkit import make_view
 
 from swarmpark.control.nav.follower import PathState
-from swarmpark.control.nav.make_room import MakeRoom, RoomState
+from swarmpark.control.nav.make_room import MakeRoom, RoomState, cut_off
 from swarmpark.control.nav.params import MakeRoomParams
 from swarmpark.control.nav.scene import Scene
 
@@ -64,3 +65,26 @@ def test_nothing_moves_without_movers():
     rooms = [RoomState(side=1)]
     res = MakeRoom(MakeRoomParams()).step(view, np.array([True]), [PathState()], rooms, scene)
     assert not res.aside.any() and rooms[0].side == 0
+
+
+def _column(pushed_to: float, other_at: float):
+    """Two spots in a column along y (heading +y): skid 0's at y = 2, skid 1's at y = 4.
+    Skid 0 was pushed along the column to ``pushed_to``; skid 1 stands at ``other_at``."""
+    up = np.pi / 2
+    view = make_view([[5.0, pushed_to, up], [5.0, other_at, up]], [[5.0, 2.0, up], [5.0, 4.0, up]])
+    plain = Scene(0.1, 0.03).update(view).skids.plain
+    return [bool(v) for v in cut_off(view, np.array([True, True]), plain, 0.09)]
+
+
+def test_a_skid_pushed_past_a_spot_that_was_filled_since_is_cut_off():
+    assert _column(5.6, 4.0) == [True, False]
+
+
+def test_a_neighbour_pushed_along_with_it_does_not_cut_it_off():
+    # Skid 1 is off its own spot too (pushed on ahead of skid 0): it will return first.
+    assert _column(3.4, 5.0) == [False, False]
+
+
+def test_a_skid_on_its_spot_or_with_a_clear_way_back_is_not_cut_off():
+    assert _column(2.0, 4.0) == [False, False]
+    assert _column(1.2, 4.0) == [False, False]  # pushed the other way

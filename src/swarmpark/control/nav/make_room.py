@@ -5,6 +5,11 @@ walks of people, widened by the mover's half-width plus ``clearance_m``. A settl
 one drives along its axis to the nearer side that is clear of every corridor and of static
 solids, keeping the side it chose while it stays in the way, and waits there while its own
 spot is still in the way.
+
+A skid pushed off its spot along its axis drives back along it; when another skid has parked
+in between since (a mover that pushed it past its own goal, found on the suite's room swap
+with perturbed starts: the two then shoved each other along the row for the rest of the run),
+it is *cut off* (:func:`cut_off`) and plans its way back round as a skid on the move.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from swarmpark.control.nav.params import MakeRoomParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.core.geometry import footprint_corners
 
-__all__ = ["MakeRoom", "RoomResult", "RoomState"]
+__all__ = ["MakeRoom", "RoomResult", "RoomState", "cut_off"]
 
 #: People slower than this stand still: they have no walk ahead to keep clear.
 _WALKING_MPS = 1e-6
@@ -150,3 +155,29 @@ class MakeRoom:
                 if s == side:
                     break
         return best
+
+
+def cut_off(
+    view: ControlView, settled: np.ndarray, plain: np.ndarray, on_goal_m: float
+) -> np.ndarray:
+    """Settled skids ``(N,)`` bool that are off their spot by more than ``on_goal_m`` with
+    another settled skid, standing within ``on_goal_m`` of its own goal, in the lane between
+    (the hull of its footprints where it stands and on its spot): the way back along its axis
+    is shut for good. ``plain``: body-frame footprint corners ``(N, 4, 2)``."""
+    n = len(view.poses)
+    out = np.zeros(n, dtype=bool)
+    off = np.hypot(*(view.poses[:, :2] - view.goals[:, :2]).T)
+    cand = np.flatnonzero(settled & (off > on_goal_m))
+    home = np.flatnonzero(settled & (off <= on_goal_m))
+    if not len(cand) or not len(home):
+        return out
+    now = footprint_corners(view.poses[cand], plain[cand])
+    spot = footprint_corners(view.goals[cand], plain[cand])
+    lanes = shapely.convex_hull(shapely.multipoints(np.concatenate([now, spot], axis=1)))
+    # Shrunk a little: a neighbour in the next row touching the lane's side does not shut it.
+    lanes = shapely.buffer(lanes, -0.02, join_style="mitre")
+    feet = shapely.polygons(footprint_corners(view.poses[home], plain[home]))
+    hit = shapely.intersects(lanes[:, None], feet[None, :])
+    hit &= cand[:, None] != home[None, :]
+    out[cand[hit.any(axis=1)]] = True
+    return out

@@ -28,7 +28,7 @@ from swarmpark.control.nav.field import PotentialField
 from swarmpark.control.nav.fleetmap import FleetState
 from swarmpark.control.nav.follower import PathFollower, PathState
 from swarmpark.control.nav.hold import hold_outside
-from swarmpark.control.nav.make_room import MakeRoom, RoomState
+from swarmpark.control.nav.make_room import MakeRoom, RoomState, cut_off
 from swarmpark.control.nav.manoeuvre import ManoeuvrePlanner, ManoeuvreState
 from swarmpark.control.nav.monitor import CollisionMonitor, MonitorResult
 from swarmpark.control.nav.params import NavParams
@@ -155,6 +155,8 @@ class Navigator:
             return cmd
         scene = self.scene.update(view)
         paths = self._states("path")
+        if p.avoidance == "rvo":
+            self._cut_off(view)
         fleet = self._fleet(view)
         self.planner.update(view, paths, self.follower, fleet if p.fleet_map.enabled else None)
         targets, final = self.follower.targets(view, idx, paths)
@@ -257,6 +259,19 @@ class Navigator:
         if len(rows):
             free = self.people.without_people(view)
             cmd[rows] = self.monitor.check(free, rows, full[rows], self.scene).commands
+
+    def _cut_off(self, view: ControlView) -> None:
+        """RVO: a skid pushed off its spot with another parked in between since is on the move
+        again, its plan repaired round the parked skids (:func:`.make_room.cut_off`)."""
+        settled = np.array([r.dock.settled for r in self.robots], dtype=bool) & view.active
+        if view.stopped is not None:
+            settled &= ~view.stopped
+        if settled.sum() < 2:
+            return
+        shut = cut_off(view, settled, self.scene.skids.plain, self.params.docking.resume_pos_m)
+        for i in np.flatnonzero(shut):
+            self.robots[i].dock.new_goal()
+            self.planner.repair(i)
 
     def _fleet(self, view: ControlView) -> FleetState:
         """The fleet as the planner sees it (:class:`~.fleetmap.FleetState`)."""

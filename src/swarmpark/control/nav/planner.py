@@ -50,6 +50,8 @@ class Planner:
         self.params = params
         self.fleet_params = FleetMapParams() if fleet_params is None else fleet_params
         self._parked: np.ndarray | None = None  # the parked skids of the last tick
+        #: Skids whose plan is repaired next tick round the parked skids (:meth:`repair`).
+        self._asked: set[int] = set()
         self.staging_m = staging_m
         self.direct_within_m = direct_within_m
         # Inflated costmaps per footprint, for the grid they were built on (held, so a new
@@ -98,7 +100,9 @@ class Planner:
                 view, np.flatnonzero(view.active & fleet.bound & ~fleet.parked), follower
             )
             stuck = self._stuck(view, states, fleet, rows, left)
-            repair = (self._blocked(view, states, fleet, rows, left) | stuck) - set(wanted)
+            blocked = self._blocked(view, states, fleet, rows, left) | self._asked
+            repair = (blocked | stuck) - set(wanted)
+            self._asked = set()
             wanted = sorted(set(wanted) | repair)
         # A bounded number of plans per tick (longest waiting first), and a bounded search
         # effort (cells expanded), so a park command for hundreds of skids does not stall the
@@ -127,6 +131,11 @@ class Planner:
             st.failed = path is None
             if path is not None:
                 st.reverse = follower.choose_end(view, i, path)
+
+    def repair(self, i: int) -> None:
+        """Plan skid ``i`` again next tick round the parked skids (as when a skid parks on its
+        path), e.g. when it is cut off from its spot (:func:`.make_room.cut_off`)."""
+        self._asked.add(int(i))
 
     def _remaining(
         self, view: ControlView, idx: np.ndarray, follower: PathFollower
