@@ -94,24 +94,26 @@ class Planner:
         # moved by the time it gets there.
         repair: set[int] = set()
         stuck: set[int] = set()
+        asked, self._asked = self._asked, set()
         if fleet is not None:
             # Where the skids on their way stand on their paths: one projection for both.
             rows, left = self._remaining(
                 view, np.flatnonzero(view.active & fleet.bound & ~fleet.parked), follower
             )
             stuck = self._stuck(view, states, fleet, rows, left)
-            blocked = self._blocked(view, states, fleet, rows, left) | self._asked
+            blocked = self._blocked(view, states, fleet, rows, left) | asked
             repair = (blocked | stuck) - set(wanted)
-            self._asked = set()
             wanted = sorted(set(wanted) | repair)
         # A bounded number of plans per tick (longest waiting first), and a bounded search
         # effort (cells expanded), so a park command for hundreds of skids does not stall the
         # loop; the others wait for their path.
         wanted.sort(key=lambda i: (states[i].planned_t, i))
         work: list[int] = []
+        done: set[int] = set()
         for i in wanted[: p.max_plans_per_tick]:
             if sum(work) >= p.max_plan_cells_per_tick:
                 break
+            done.add(i)
             st = states[i]
             goal = view.goals[i]
             cm = self.costmap(view, view.footprints[i])
@@ -131,10 +133,11 @@ class Planner:
             st.failed = path is None
             if path is not None:
                 st.reverse = follower.choose_end(view, i, path)
+        self._asked = (asked & repair) - done  # asked for, but over this tick's budget
 
     def repair(self, i: int) -> None:
-        """Plan skid ``i`` again next tick round the parked skids (as when a skid parks on its
-        path), e.g. when it is cut off from its spot (:func:`.make_room.cut_off`)."""
+        """Plan skid ``i`` again at the next update, round the parked skids (as when a skid
+        parks on its path), e.g. when it is cut off from its spot (:func:`.make_room.cut_off`)."""
         self._asked.add(int(i))
 
     def _remaining(
