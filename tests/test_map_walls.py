@@ -71,8 +71,8 @@ def test_a_goto_into_a_block_is_refused_and_the_orders_kept(tmp_path):
     assert ok.accepted
     out = sup.command("goto", {"robot": "a", "pose": [5.0, 4.0, 90]})
     assert not out.accepted
-    assert (
-        out.reason
-        == "goto.pose: robot 'a' would be in an occupied cell of the map or outside it at [5.0, 4.0]"
+    assert out.reason == (
+        "goto.pose: robot 'a' would be in an occupied cell of the map or outside it at "
+        "[5.0, 4.0, 90.0]"
     )
     np.testing.assert_allclose(sup.goals[0], [1.5, 7.0, 0.0])

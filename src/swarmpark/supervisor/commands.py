@@ -339,7 +339,7 @@ class CommandsMixin:
         if self.world.off_map_or_in_cells(corners)[0]:
             return (
                 f"goto.pose: robot {self.ids[i]!r} would be in an occupied cell of the map or "
-                f"outside it at {[round(float(v), 3) for v in goal[:2]]}"
+                f"outside it at {where}"
             )
         return ""
 
