@@ -1,5 +1,5 @@
 """The planner on hand-built views: paths end with a straight run along the goal's axis, plans
-wait for their turn, and a failed plan is tried again only when due."""
+(and repairs asked for) wait for their turn, and a failed plan is tried again only when due."""
 
 import numpy as np
 import pytest
@@ -82,3 +82,29 @@ def test_planner_params_name_the_bad_field():
         PlannerParams(max_plan_cells_per_tick=0)
     with pytest.raises(ValueError, match="PlannerParams.plan_resolution_m"):
         PlannerParams(plan_resolution_m=-0.1)
+
+
+def test_a_repair_asked_for_over_the_ticks_budget_waits_for_the_next_update():
+    from swarmpark.control.nav.fleetmap import FleetState
+
+    poses = [[1.0, 1.0, 0.0], [1.0, 4.0, 0.0], [5.0, 2.5, np.pi / 2]]
+    goals = [[8.0, 1.0, 0.0], [8.0, 4.0, 0.0], [5.0, 2.5, np.pi / 2]]
+    fleet = FleetState(
+        parked=np.array([False, False, True]),
+        bound=np.array([True, True, False]),
+        still=np.zeros(3, dtype=bool),
+        waiting=np.zeros(3, dtype=bool),
+    )
+    states = [PathState() for _ in range(3)]
+    pl, fol = _planner(max_plans_per_tick=1), PathFollower(FollowerParams())
+    for t in (0.0, 0.1, 0.2):  # first plans, one per tick
+        pl.update(make_view(poses, goals, t=t, goal_changed=[t == 0.0] * 3), states, fol, fleet)
+    assert all(s.path is not None for s in states)
+    pl.repair(0)
+    pl.repair(1)
+    pl.update(make_view(poses, goals, t=1.0), states, fol, fleet)
+    assert sorted(s.planned_t for s in states[:2]) == [0.1, 1.0]  # one repair this tick
+    pl.update(make_view(poses, goals, t=1.1), states, fol, fleet)
+    assert sorted(s.planned_t for s in states[:2]) == [1.0, 1.1]  # the other one the next
+    pl.update(make_view(poses, goals, t=1.2), states, fol, fleet)
+    assert sorted(s.planned_t for s in states[:2]) == [1.0, 1.1]  # and no more
