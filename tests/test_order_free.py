@@ -70,6 +70,15 @@ def test_perturbed_starts_are_seeded_within_bounds_and_clear():
     assert np.abs(sa - s0).max() > 0.01  # really moved
     other = _world(dict(p, seed=4))
     assert not np.array_equal(sa, np.stack([r.start for r in other.robots]))
+    # Another draw for the same seed (a generated site is made from the seed): other starts,
+    # within the same bounds; draw 0 is the seed's own draw.
+    drawn = [
+        np.stack([r.start for r in _world(dict(p, perturb={**p["perturb"], "draw": k})).robots])
+        for k in (0, 1, 2)
+    ]
+    np.testing.assert_array_equal(drawn[0], sa)
+    assert not np.array_equal(drawn[1], sa) and not np.array_equal(drawn[1], drawn[2])
+    assert np.all(np.abs(drawn[1][:, :2] - s0[:, :2]) <= 0.2 + 1e-12)
 
 
 def test_an_impossible_perturbation_is_refused_with_the_reason():
@@ -99,3 +108,5 @@ def test_the_perturb_block_is_validated():
         _world(dict(data, perturb={"start_m": -1}))
     with pytest.raises(ScenarioError, match="perturb.jitter"):
         _world(dict(data, perturb={"jitter": 1}))
+    with pytest.raises(ScenarioError, match="perturb.draw"):
+        _world(dict(data, perturb={"draw": -1}))

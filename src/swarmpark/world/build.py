@@ -264,10 +264,11 @@ PERTURB_TRIES = 50
 
 def _perturbed_starts(world: World) -> tuple[RobotConfig, ...]:
     """The robots with their starts moved as ``scenario.perturb`` says, drawn from the
-    scenario's seed in the fleet's order; each start keeps clear of walls, obstacles and the
-    skids already placed."""
+    scenario's seed (and ``perturb.draw``) in the fleet's order; each start keeps clear of
+    walls, obstacles and the skids already placed."""
     spec = world.scenario.perturb
-    rng = np.random.default_rng([world.scenario.seed, PERTURB_STREAM])
+    key = [world.scenario.seed, PERTURB_STREAM]
+    rng = np.random.default_rng(key + [2, spec.draw] if spec.draw else key)
     pieces, _ = world.static_convex_pieces()
     bounds = np.array([spec.start_m, spec.start_m, np.deg2rad(spec.start_deg)])
     placed: list[np.ndarray] = []  # corners of the skids placed so far

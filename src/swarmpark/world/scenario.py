@@ -367,11 +367,15 @@ class PerturbSpec(_Model):
     site from slightly different starts). Each start moves uniformly within ``start_m`` in x
     and y and ``start_deg`` in heading, redrawn (up to :data:`PERTURB_TRIES` times) while it
     would start in a wall or on another skid; ``shuffle`` lists the robots in a random order
-    (which must not change the outcome: robots are ordered by id, see world.build)."""
+    (which must not change the outcome: robots are ordered by id, see world.build).
+    ``draw`` picks another draw of the start moves for the same seed: a generated site is
+    made from the seed, so sweeps run one site from several starts with ``draw: [1, 2, 3]``
+    (0: the seed's own draw)."""
 
     start_m: Annotated[float, Field(ge=0, le=2.0)] = 0.0
     start_deg: Annotated[float, Field(ge=0, le=180.0)] = 0.0
     shuffle: bool = False
+    draw: Annotated[int, Field(ge=0, le=1_000_000)] = 0
 
 
 class Scenario(_Model):
