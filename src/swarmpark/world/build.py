@@ -268,6 +268,8 @@ def _perturbed_starts(world: World) -> tuple[RobotConfig, ...]:
     walls, obstacles and the skids already placed."""
     spec = world.scenario.perturb
     key = [world.scenario.seed, PERTURB_STREAM]
+    # Sub-stream 1 is the shuffle's; draws other than 0 take sub-stream 2 (draw 0 keeps the
+    # stream of the runs made before draws existed).
     rng = np.random.default_rng(key + [2, spec.draw] if spec.draw else key)
     pieces, _ = world.static_convex_pieces()
     bounds = np.array([spec.start_m, spec.start_m, np.deg2rad(spec.start_deg)])

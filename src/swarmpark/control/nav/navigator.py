@@ -260,12 +260,19 @@ class Navigator:
             free = self.people.without_people(view)
             cmd[rows] = self.monitor.check(free, rows, full[rows], self.scene).commands
 
+    def _settled(self, view: ControlView) -> tuple[np.ndarray, np.ndarray]:
+        """RVO: the skids settled on their goal that can move, and the immobile ones (stopped,
+        e-stopped or idle), each ``(N,)``."""
+        immobile = ~view.active
+        if view.stopped is not None:
+            immobile |= view.stopped
+        settled = np.array([r.dock.settled for r in self.robots], dtype=bool) & ~immobile
+        return settled, immobile
+
     def _cut_off(self, view: ControlView) -> None:
         """RVO: a skid pushed off its spot with another parked in between since is on the move
         again, its plan repaired round the parked skids (:func:`.make_room.cut_off`)."""
-        settled = np.array([r.dock.settled for r in self.robots], dtype=bool) & view.active
-        if view.stopped is not None:
-            settled &= ~view.stopped
+        settled, _ = self._settled(view)
         if settled.sum() < 2:
             return
         shut = cut_off(view, settled, self.scene.skids.plain, self.params.docking.resume_pos_m)
@@ -306,10 +313,7 @@ class Navigator:
     ) -> np.ndarray:
         """RVO: make room, climb the deadlock ladder, then one ORCA step for all skids."""
         robots = self.robots
-        immobile = ~view.active
-        if view.stopped is not None:
-            immobile |= view.stopped
-        settled = np.array([r.dock.settled for r in robots], dtype=bool) & ~immobile
+        settled, immobile = self._settled(view)
         room = self.make_room.step(
             view, settled, self._states("path"), self._states("room"), self.scene
         )
