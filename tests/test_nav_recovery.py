@@ -173,10 +173,16 @@ def test_give_way_backs_away_from_a_higher_rank_and_not_when_docking():
     assert out[1, 0] == pytest.approx(-GiveWayParams().speed_share * 0.5)  # backs away
     assert np.array_equal(out[0], raw[0])
     assert states[1].from_robot == 0 and states[1].until_s == 10.0 + GiveWayParams().duration_s
-    # Held up by a lower rank: it keeps going.
-    states = [GiveWayState(blockers={1}, blocked_s=1.0), GiveWayState()]
+    # Held up by a lower rank: it keeps going...
+    states = [GiveWayState(blockers={1}, blocked_s=1.0, held_s=1.0), GiveWayState()]
     out = gw.step(view, np.array([0, 1]), raw, dist, states, [False, False])
     assert np.array_equal(out, raw)
+    # ...until that one has had inherit_after_s to clear and has not: then it gives way too.
+    p = GiveWayParams()
+    states[0].blocked_s = states[0].held_s = p.inherit_after_s
+    out = gw.step(view, np.array([0, 1]), raw, dist, states, [False, False])
+    assert out[0, 0] == pytest.approx(-p.speed_share * 0.5) and np.array_equal(out[1], raw[1])
+    assert states[0].from_robot == 1 and states[0].blocked_s == 0.0
     # A docked skid never gives way.
     states = [GiveWayState(), GiveWayState(blockers={0}, blocked_s=1.0)]
     out = gw.step(view, np.array([0, 1]), raw, dist, states, [False, True])
@@ -201,6 +207,7 @@ def test_stall_watch_counts_still_commands_only():
         (DeadlockParams, {"stuck_s": 0.0}, "stuck_s"),
         (BackUpParams, {"speed_share": 2.0}, "speed_share"),
         (GiveWayParams, {"clear_m": float("nan")}, "clear_m"),
+        (GiveWayParams, {"inherit_after_s": 0.0}, "inherit_after_s"),
         (StallParams, {"time_s": -1.0}, "time_s"),
     ],
 )

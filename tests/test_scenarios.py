@@ -73,15 +73,23 @@ def test_formation_transit_from_perturbed_starts(seed):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("name", "seed"), [("hallway-side-room-fig7", 4), ("elevator", 3), ("room-swap-fig8", 3)]
+    ("name", "seed"),
+    [
+        ("hallway-side-room-fig7", 4),
+        ("elevator", 3),
+        ("room-swap-fig8", 3),
+        ("hangar-bay-12", 5),
+    ],
 )
 def test_perturbed_runs_that_once_failed_park(name, seed):
     """Runs of the perturbed suite (sweeps/suite-perturbed.yaml) that once failed. Two end in
     a manoeuvre: a reverse run the lattice once planned into a wall just past its window
     (hallway), and a turn in a doorway the monitor held every time it was planned again
     (elevator). In the room swap, skid a pushed e3 along its row past a's spot and parked
-    there: e3 is cut off and plans its way back round (make_room.cut_off). All park, without
-    contact."""
+    there: e3 is cut off and plans its way back round (make_room.cut_off). In the hangar bay,
+    b10 was boxed in in the first column's gap, turning on the spot, while b5 and b11, of
+    higher rank, waited beside it for good: held up that long by a skid of lower rank, they
+    give way to it too (recovery.GiveWay, inherit_after_s). All park, without contact."""
     import yaml
 
     from swarmpark.world.scenario import parse_scenario

@@ -396,10 +396,14 @@ class GiveWayParams:
     speed_share: float = 0.5
     #: Skids this close to their goal (two docking radii) are docking: they never give way.
     exempt_within_m: float = 0.6
+    #: Held up this long by skids of lower rank, which have had ``after_s`` plus
+    #: ``duration_s`` twice over to clear and have not, a skid gives way to them too.
+    inherit_after_s: float = 8.0
 
     def __post_init__(self) -> None:
         _check(self, {"after_s": ">=0", "duration_s": ">0", "clear_m": ">0"})
         _check(self, {"speed_share": "share", "exempt_within_m": ">=0"})
+        _check(self, {"inherit_after_s": ">0"})
 
 
 @dataclass(frozen=True, kw_only=True)

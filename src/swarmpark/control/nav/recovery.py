@@ -126,17 +126,27 @@ class GiveWayState:
     blocked_s: float = 0.0
     until_s: float = -np.inf
     from_robot: int = -1
+    #: Held up without a break, giving way or not (``blocked_s`` restarts when it gives way).
+    held_s: float = 0.0
 
     def observe(self, blockers: set, dt: float) -> None:
         """The monitor's verdict this tick: the skids that slowed this one (or none)."""
         self.blockers = blockers
         self.blocked_s = self.blocked_s + dt if blockers else 0.0
+        self.held_s = self.held_s + dt if blockers else 0.0
 
 
 class GiveWay:
     """Right of way at bottlenecks: a skid held up by a skid of higher rank (priority, then
     nearer its goal, then lower index) for ``after_s`` backs away from it for up to
-    ``duration_s``, so the other can pass. Docking skids never give way."""
+    ``duration_s``, so the other can pass. Docking skids never give way.
+
+    A skid of lower rank may be unable to clear (boxed in, turning on the spot between parked
+    skids and the ones waiting for it): held up by it for ``inherit_after_s``, the skid of
+    higher rank gives way to it as well. This is the step of priority inheritance with
+    backtracking (Okumura et al., "Priority inheritance with backtracking for iterative
+    multi-agent path finding", AIJ 2022) that a local rule can take: an agent whose way is
+    held by one that cannot move gives up its own move instead of waiting for ever."""
 
     def __init__(self, params: GiveWayParams) -> None:
         self.params = params
@@ -154,6 +164,8 @@ class GiveWay:
             if view.t >= st.until_s and st.blocked_s >= p.after_s:
                 better = [j for j in st.blockers if j in rank and rank[j] < rank[int(i)]]
                 better += [j for j in st.blockers if j not in rank]  # idle/parked skids
+                if not better and st.held_s >= p.inherit_after_s:
+                    better = [j for j in st.blockers if j in rank]  # they could not clear
                 if better:
                     st.from_robot = min(better, key=lambda j: rank.get(j, (-np.inf,)))
                     st.until_s = view.t + p.duration_s
