@@ -171,6 +171,43 @@ def test_fill_order_holds_a_skid_that_would_overtake_the_one_bound_deeper():
     assert fill_order.held([group], poses).tolist() == [False, False, False]
 
 
+def test_two_spots_that_shut_a_bay_together_hold_the_second_skid():
+    # A bay open to the west (x = 1); the two goals at its mouth, B and C, each leave a lane
+    # to the deep goal A, but not both: the layout's pairwise blocks see nothing, and the
+    # goals filled now do.
+    walls = [box(1, 0.4, 5.6, 1.0), box(1, 3.4, 5.6, 4.0), box(5.0, 1.0, 5.6, 3.4)]
+    grid = grid_from_walls((6.0, 4.0), 0.05, walls)
+    fps = [Footprint(1.0, 0.6, 0.5)] * 3
+    goals = np.array([[4.0, 2.2, 0.0], [1.7, 1.6, 0.0], [1.7, 2.7, 0.0]])  # A, B, C
+    boundary = box(1.0, 1.0, 5.0, 3.4)
+    r = fill_order.reach(goals, fps, boundary, grid)
+    blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid, r)
+    assert blocks == ((), (), ())
+    assert r.cut_off(frozenset({1}), 2).tolist() == [True, False, False]
+    assert not r.cut_off(frozenset(), 2).any()
+    group = ParkGroup(
+        robots=np.array([0, 1, 2]),
+        goals=goals,
+        cost="euclidean",
+        goal_of=np.array([0, 1, 2]),
+        fill_order=(0, 1, 2),
+        boundary=boundary,
+        method="stacking",
+        report={},
+        blocks=blocks,
+        reach=r,
+    )
+    # A's skid far behind, B parked, C's skid at the mouth: C waits.
+    poses = np.array([[-3.0, 2.2, 0.0], goals[1], [0.2, 2.7, 0.0]])
+    assert fill_order.held([group], poses).tolist() == [False, False, True]
+    # B not parked yet: C may take its spot (B is then the one to wait, not C).
+    poses[1] = [0.0, 1.6, 0.0]
+    assert fill_order.held([group], poses).tolist() == [False, False, False]
+    # A's skid ahead of C's (nearer its goal): C may follow it.
+    poses[1], poses[0] = goals[1], [3.0, 2.2, 0.0]
+    assert fill_order.held([group], poses).tolist() == [False, False, False]
+
+
 # ----------------------------------------------------------------------------- commands
 
 

@@ -82,6 +82,8 @@ class ParkGroup:
     goal_dims: tuple[tuple[float, float], ...] = ()
     #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
     blocks: tuple[tuple[int, ...], ...] = ()
+    #: Reachability of the goals from outside with some of them taken (holds as they fill).
+    reach: Any = None
     switches: int = 0
     #: The park command that made it (to lay it out again, :mod:`.spot_watch`).
     command: ParkCmd | None = None
@@ -206,6 +208,7 @@ class CommandsMixin:
             goal_of = assign_mod.assign(cost)
         except assign_mod.AssignmentError as exc:
             return str(exc)
+        blocks, reach = self._blockers(goals, fps, boundary, tuple(lay.fill_order))
         group = ParkGroup(
             idx,
             goals,
@@ -216,7 +219,8 @@ class CommandsMixin:
             lay.method,
             report,
             goal_dims=tuple((f.length_m, f.width_m) for f in fps),
-            blocks=self._blockers(goals, fps, boundary, tuple(lay.fill_order)),
+            blocks=blocks,
+            reach=reach,
             command=cmd,
         )
         bound_inputs = (

@@ -222,9 +222,12 @@ class Supervisor(CommandsMixin):
 
     # ------------------------------------------------------------------ fill order
 
-    def _blockers(self, goals: np.ndarray, fps, boundary, order) -> tuple[tuple[int, ...], ...]:
-        """Fill-order holds of a new group on the planning map (:func:`.fill_order.blockers`)."""
-        return fill_order.blockers(goals, fps, boundary, order, self.known_grid)
+    def _blockers(self, goals: np.ndarray, fps, boundary, order):
+        """Fill-order holds of a new group on the planning map: the blocks of the layout's
+        fill order (:func:`.fill_order.blockers`) and the group's :class:`.fill_order.Reach`
+        (None for a group without holds)."""
+        r = fill_order.reach(goals, fps, boundary, self.known_grid)
+        return fill_order.blockers(goals, fps, boundary, order, self.known_grid, r), r
 
     def held(self) -> np.ndarray:
         """Robots that must wait outside their boundary (:func:`.fill_order.held`)."""

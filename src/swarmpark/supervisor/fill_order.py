@@ -13,12 +13,21 @@ from __future__ import annotations
 
 import numpy as np
 import shapely
+from scipy import ndimage
 from shapely.geometry import Polygon
 
 from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 
-__all__ = ["blockers", "held", "BLOCKING_RESOLUTION_M", "BLOCKING_MAX_GOALS", "BLOCKING_CROP_M"]
+__all__ = [
+    "Reach",
+    "blockers",
+    "held",
+    "reach",
+    "BLOCKING_RESOLUTION_M",
+    "BLOCKING_MAX_GOALS",
+    "BLOCKING_CROP_M",
+]
 
 #: Fill-order blocking is judged on a grid this coarse, cropped this far around the boundary.
 BLOCKING_RESOLUTION_M = 0.1
@@ -26,17 +35,93 @@ BLOCKING_MAX_GOALS = 40
 BLOCKING_CROP_M = 3.0
 
 
+class Reach:
+    """Which goals of one parking group a disc one skid wide can reach from outside the
+    boundary, with a given set of the group's goals occupied: connectivity of the free space
+    of the map on a coarse grid cropped around the boundary (scipy.ndimage.label), seeded
+    outside the boundary. Results are cached by the set occupied (a park fills a few dozen
+    goals, so a tick looks them up).
+
+    Parameters
+    ----------
+    goals
+        ``(G, 3)`` goal poses.
+    fps
+        The footprint laid out at each goal.
+    boundary
+        The parking boundary.
+    grid
+        The map the skids plan in.
+    """
+
+    def __init__(self, goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -> None:
+        from swarmpark.core.geometry import footprint_polygon
+
+        half = max(f.width_m for f in fps) / 2
+        res = max(grid.resolution_m, BLOCKING_RESOLUTION_M)
+        xmin, ymin, xmax, ymax = boundary.buffer(BLOCKING_CROP_M).bounds
+        gx0, gy0, gx1, gy1 = grid.bounds
+        xmin, ymin = max(xmin, gx0), max(ymin, gy0)
+        xmax, ymax = min(xmax, gx1), min(ymax, gy1)
+        xs = np.arange(xmin + res / 2, xmax, res)
+        ys = np.arange(ymin + res / 2, ymax, res)
+        X, Y = np.meshgrid(xs, ys)
+        pts = np.column_stack([X.ravel(), Y.ravel()])
+        occ = grid.is_occupied(pts).reshape(X.shape)
+        self.free = ndimage.distance_transform_edt(~occ) * res > half
+        polys = [footprint_polygon(g, f) for g, f in zip(goals, fps, strict=True)]
+        self.masks = [shapely.contains_xy(poly.buffer(half - 1e-6), X, Y) for poly in polys]
+        self.seeds = ~shapely.contains_xy(boundary.buffer(res), X, Y) & self.free
+        centers = np.array([list(p.centroid.coords)[0] for p in polys])
+        self.cj = np.clip(((centers[:, 1] - ymin) / res).astype(int), 0, len(ys) - 1)
+        self.ci = np.clip(((centers[:, 0] - xmin) / res).astype(int), 0, len(xs) - 1)
+        self._reached: dict[frozenset, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self.masks)
+
+    def reached(self, occupied: frozenset) -> np.ndarray:
+        """``(G,)``: which goals can be reached with the goals ``occupied`` taken (an occupied
+        goal counts as not reached)."""
+        out = self._reached.get(occupied)
+        if out is None:
+            space = self.free.copy()
+            for k in occupied:
+                space &= ~self.masks[k]
+            labels, _ = ndimage.label(space, structure=np.ones((3, 3)))
+            outside = np.unique(labels[self.seeds & space])
+            lab = labels[self.cj, self.ci]
+            out = (lab > 0) & np.isin(lab, outside)
+            self._reached[occupied] = out
+        return out
+
+    def cut_off(self, filled: frozenset, k: int) -> np.ndarray:
+        """``(G,)``: the goals, reached with ``filled`` taken, that taking goal ``k`` as
+        well would cut off."""
+        before = self.reached(filled)
+        after = self.reached(filled | {k})
+        cut = before & ~after
+        cut[k] = False
+        return cut
+
+
+def reach(goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -> Reach | None:
+    """The :class:`Reach` of a group, or None for groups of one goal or of more than
+    :data:`BLOCKING_MAX_GOALS` (the fill order's tests are quadratic): those get no holds."""
+    n = len(goals)
+    if n < 2 or n > BLOCKING_MAX_GOALS:
+        return None
+    return Reach(goals, fps, boundary, grid)
+
+
 def blockers(
-    goals: np.ndarray, fps, boundary: Polygon, fill_order, grid: OccupancyGrid
+    goals: np.ndarray, fps, boundary: Polygon, fill_order, grid: OccupancyGrid, r: Reach | None = None
 ) -> tuple[tuple[int, ...], ...]:
     """For each goal k, the goals j filled before k (in the layout's fill order) that can be
     reached from outside the boundary with the goals before j occupied, but not once k is
-    occupied as well: k must stay free until those are filled.
-
-    Reachability is connectivity of the free space of ``grid`` for a disc one skid wide, on a
-    coarse grid cropped around the boundary (scipy.ndimage.label), seeded outside the
-    boundary. Groups of one goal, or of more than :data:`BLOCKING_MAX_GOALS` (the test is
-    quadratic), get no holds.
+    occupied as well: k must stay free until those are filled (:class:`Reach`; ``r`` if
+    given, else made here). Groups of one goal, or of more than :data:`BLOCKING_MAX_GOALS`,
+    get no holds.
 
     Parameters
     ----------
@@ -51,66 +136,46 @@ def blockers(
     grid
         The map the skids plan in.
     """
-    from scipy import ndimage
-
-    from swarmpark.core.geometry import footprint_polygon
-
     n = len(goals)
-    if n < 2 or n > BLOCKING_MAX_GOALS:
+    r = r if r is not None else reach(goals, fps, boundary, grid)
+    if r is None:
         return tuple(() for _ in goals)
-    half = max(f.width_m for f in fps) / 2
-    res = max(grid.resolution_m, BLOCKING_RESOLUTION_M)
-    xmin, ymin, xmax, ymax = boundary.buffer(BLOCKING_CROP_M).bounds
-    gx0, gy0, gx1, gy1 = grid.bounds
-    xmin, ymin, xmax, ymax = max(xmin, gx0), max(ymin, gy0), min(xmax, gx1), min(ymax, gy1)
-    xs = np.arange(xmin + res / 2, xmax, res)
-    ys = np.arange(ymin + res / 2, ymax, res)
-    X, Y = np.meshgrid(xs, ys)
-    pts = np.column_stack([X.ravel(), Y.ravel()])
-    occ = grid.is_occupied(pts).reshape(X.shape)
-    free = ndimage.distance_transform_edt(~occ) * res > half
-    polys = [footprint_polygon(g, f) for g, f in zip(goals, fps, strict=True)]
-    masks = [shapely.contains_xy(poly.buffer(half - 1e-6), X, Y) for poly in polys]
-    seeds = ~shapely.contains_xy(boundary.buffer(res), X, Y) & free
-    centers = np.array([list(p.centroid.coords)[0] for p in polys])
-    cj = np.clip(((centers[:, 1] - ymin) / res).astype(int), 0, len(ys) - 1)
-    ci = np.clip(((centers[:, 0] - xmin) / res).astype(int), 0, len(xs) - 1)
-    rank = {g: r for r, g in enumerate(fill_order)}
+    rank = {g: i for i, g in enumerate(fill_order)}
     order = sorted(range(n), key=lambda g: rank.get(g, n))
-
-    def reachable(space: np.ndarray, j: int) -> bool:
-        labels, _ = ndimage.label(space, structure=np.ones((3, 3)))
-        lab = labels[cj[j], ci[j]]
-        return bool(lab) and bool(np.any(labels[seeds & space] == lab))
-
     blocks: list[set[int]] = [set() for _ in range(n)]
-    occupied = np.zeros(X.shape, dtype=bool)
     for pos, j in enumerate(order):
-        base = free & ~occupied
-        if reachable(base, j):
-            for k in order[pos + 1 :]:
-                if not reachable(base & ~masks[k], j):
-                    blocks[k].add(j)
-        occupied |= masks[j]
+        before = frozenset(order[:pos])
+        if not r.reached(before)[j]:
+            continue
+        for k in order[pos + 1 :]:
+            if not r.reached(before | {k})[j]:
+                blocks[k].add(j)
     return tuple(tuple(sorted(b)) for b in blocks)
 
 
 def held(groups, poses: np.ndarray) -> np.ndarray:
-    """Robots that must wait outside their boundary: their goal would block a deeper goal
-    that is not filled yet and whose skid is not ahead of them (deepest goals first, 2018
-    Fig. 6). A skid may follow the one bound deeper; it must not overtake it.
+    """Robots that must wait outside their boundary: their goal would cut off a goal that is
+    not filled yet and whose skid is not ahead of them (deepest goals first, 2018 Fig. 6). A
+    skid may follow the one bound deeper; it must not overtake it.
+
+    A goal cuts off another when the layout's fill order says so (``blocks``), or when taking
+    it as well as the goals filled now would (``reach``, :meth:`Reach.cut_off`): skids do
+    not park in the fill order, and two spots side by side can shut a door that neither
+    shuts alone.
 
     Parameters
     ----------
     groups
         Parking groups, each with ``robots`` (indices), ``goals`` ``(G, 3)``, ``goal_of``
-        (goal index per robot) and ``blocks`` (from :func:`blockers`).
+        (goal index per robot), ``blocks`` (from :func:`blockers`) and ``reach`` (a
+        :class:`Reach` or None).
     poses
         ``(N, 3)`` the poses the fleet decides from (estimates with onboard localization).
     """
     hold = np.zeros(len(poses), dtype=bool)
     for g in groups:
-        if not g.blocks or not any(g.blocks):
+        r = getattr(g, "reach", None)
+        if r is None and (not g.blocks or not any(g.blocks)):
             continue
         pos_err, head_err = goal_errors(poses[g.robots], g.goals[g.goal_of])
         parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
@@ -118,6 +183,10 @@ def held(groups, poses: np.ndarray) -> np.ndarray:
         filled[g.goal_of[parked]] = True
         to_go = np.full(len(g.goals), np.inf)  # distance of each goal's skid to it
         to_go[g.goal_of] = pos_err
-        for r, k, d in zip(g.robots, g.goal_of, pos_err, strict=True):
-            hold[r] = any(not filled[j] and to_go[j] >= d for j in g.blocks[k])
+        taken = frozenset(np.flatnonzero(filled).tolist())
+        for rob, k, d in zip(g.robots, g.goal_of, pos_err, strict=True):
+            first = [j for j in (g.blocks[k] if g.blocks else ()) if not filled[j]]
+            if r is not None:
+                first += np.flatnonzero(r.cut_off(taken, int(k))).tolist()
+            hold[rob] = any(to_go[j] >= d for j in first)
     return hold
