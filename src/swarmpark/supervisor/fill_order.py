@@ -1,9 +1,11 @@
 """Fill order of a parking group: which goal must stay free until which others are filled.
 
 A skid that parks at the mouth of a dead end before the skids bound deeper would wall them
-in (2018 paper, Fig. 6: deepest goals first). :func:`blockers` works out, once per park
-command, for every goal the goals it would cut off; :func:`held` decides every tick which
-skids must wait outside their boundary because of that.
+in (2018 paper, Fig. 6: deepest goals first). :class:`Reach` says which goals can be
+reached with a set of goals taken; :func:`blockers` works out from it, once per park
+command, for every goal the goals it would cut off in the layout's fill order; :func:`held`
+decides every tick which skids must wait outside their boundary because of that, or because
+their goal would cut one off together with the goals filled now.
 
 Both are functions of their inputs (a grid, goals, footprints; the group's robots and their
 pose estimates), testable without a simulator.
