@@ -117,7 +117,12 @@ def reach(goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -> Rea
 
 
 def blockers(
-    goals: np.ndarray, fps, boundary: Polygon, fill_order, grid: OccupancyGrid, r: Reach | None = None
+    goals: np.ndarray,
+    fps,
+    boundary: Polygon,
+    fill_order,
+    grid: OccupancyGrid,
+    r: Reach | None = None,
 ) -> tuple[tuple[int, ...], ...]:
     """For each goal k, the goals j filled before k (in the layout's fill order) that can be
     reached from outside the boundary with the goals before j occupied, but not once k is
