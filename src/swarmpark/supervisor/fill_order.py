@@ -79,9 +79,6 @@ class Reach:
         self.ci = np.clip(((centers[:, 0] - xmin) / res).astype(int), 0, len(xs) - 1)
         self._reached: dict[frozenset, np.ndarray] = {}
 
-    def __len__(self) -> int:
-        return len(self.masks)
-
     def reached(self, occupied: frozenset) -> np.ndarray:
         """``(G,)``: which goals can be reached with the goals ``occupied`` taken (an occupied
         goal counts as not reached)."""
@@ -181,7 +178,7 @@ def held(groups, poses: np.ndarray) -> np.ndarray:
     """
     hold = np.zeros(len(poses), dtype=bool)
     for g in groups:
-        r = getattr(g, "reach", None)
+        r = g.reach
         if r is None and (not g.blocks or not any(g.blocks)):
             continue
         pos_err, head_err = goal_errors(poses[g.robots], g.goals[g.goal_of])
