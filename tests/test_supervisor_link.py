@@ -138,6 +138,22 @@ def _dead_end():
     return grid, fps, goals, boundary
 
 
+def _group(goals, boundary, blocks, reach=None):
+    """Three skids, skid i bound for goal i, filled in index order."""
+    return ParkGroup(
+        robots=np.array([0, 1, 2]),
+        goals=goals,
+        cost="euclidean",
+        goal_of=np.array([0, 1, 2]),
+        fill_order=(0, 1, 2),
+        boundary=boundary,
+        method="stacking",
+        report={},
+        blocks=blocks,
+        reach=reach,
+    )
+
+
 def test_blockers_of_a_dead_end_are_the_goals_deeper_in():
     grid, fps, goals, boundary = _dead_end()
     blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
@@ -149,17 +165,7 @@ def test_blockers_of_a_dead_end_are_the_goals_deeper_in():
 def test_fill_order_holds_a_skid_that_would_overtake_the_one_bound_deeper():
     grid, fps, goals, boundary = _dead_end()
     blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
-    group = ParkGroup(
-        robots=np.array([0, 1, 2]),
-        goals=goals,
-        cost="euclidean",
-        goal_of=np.array([0, 1, 2]),
-        fill_order=(0, 1, 2),
-        boundary=boundary,
-        method="stacking",
-        report={},
-        blocks=blocks,
-    )
+    group = _group(goals, boundary, blocks)
     # Robot 0 (deepest goal) is far behind; robots 1 and 2 are nearer their goals: held.
     poses = np.array([[-3.0, 2.6, 0.0], [1.0, 2.6, 0.0], [2.0, 2.6, 0.0]])
     assert fill_order.held([group], poses).tolist() == [False, True, True]
@@ -185,18 +191,7 @@ def test_two_spots_that_shut_a_bay_together_hold_the_second_skid():
     assert blocks == ((), (), ())
     assert r.cut_off(frozenset({1}), 2).tolist() == [True, False, False]
     assert not r.cut_off(frozenset(), 2).any()
-    group = ParkGroup(
-        robots=np.array([0, 1, 2]),
-        goals=goals,
-        cost="euclidean",
-        goal_of=np.array([0, 1, 2]),
-        fill_order=(0, 1, 2),
-        boundary=boundary,
-        method="stacking",
-        report={},
-        blocks=blocks,
-        reach=r,
-    )
+    group = _group(goals, boundary, blocks, r)
     # A's skid far behind, B parked, C's skid at the mouth: C waits.
     poses = np.array([[-3.0, 2.2, 0.0], goals[1], [0.2, 2.7, 0.0]])
     assert fill_order.held([group], poses).tolist() == [False, False, True]

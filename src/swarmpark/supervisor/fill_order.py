@@ -42,18 +42,7 @@ class Reach:
     boundary, with a given set of the group's goals occupied: connectivity of the free space
     of the map on a coarse grid cropped around the boundary (scipy.ndimage.label), seeded
     outside the boundary. Results are cached by the set occupied (a park fills a few dozen
-    goals, so a tick looks them up).
-
-    Parameters
-    ----------
-    goals
-        ``(G, 3)`` goal poses.
-    fps
-        The footprint laid out at each goal.
-    boundary
-        The parking boundary.
-    grid
-        The map the skids plan in.
+    goals, so a tick looks them up). Parameters as :func:`blockers`.
     """
 
     def __init__(self, goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -> None:
