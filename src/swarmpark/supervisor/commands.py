@@ -23,6 +23,7 @@ from swarmpark.core.geometry import GeometryError, as_simple_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 from swarmpark.plan.spot_reach import as_report, spot_reach
+from swarmpark.supervisor.fill_order import Reach
 from swarmpark.supervisor.known_map import KnownMap, OperatorMap, SensedMap
 from swarmpark.supervisor.registry import COMMANDS
 from swarmpark.world.scenario import CommandSpec, GotoCmd, ParkCmd
@@ -83,7 +84,7 @@ class ParkGroup:
     #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
     blocks: tuple[tuple[int, ...], ...] = ()
     #: Reachability of the goals from outside with some of them taken (holds as they fill).
-    reach: Any = None
+    reach: Reach | None = None
     switches: int = 0
     #: The park command that made it (to lay it out again, :mod:`.spot_watch`).
     command: ParkCmd | None = None
