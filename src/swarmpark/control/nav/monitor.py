@@ -141,6 +141,8 @@ class CollisionMonitor:
                 b.clear()  # only a skid slowed down was held up by the others
         if joint and robots:
             self.joint_check(view, idx, out, body)
+        elif robots:
+            self.close_pairs(view, idx, out, scene, blockers)
         return MonitorResult(out, blockers, slowed)
 
     def _straight_on(self, view, idx, raw, out, stuck, body, scene, others, robots) -> None:
@@ -285,6 +287,65 @@ class CollisionMonitor:
         if fps is not self._fps:
             self._fps, self._fps_reach = fps, max(f.circumradius_m for f in fps)
         return self._fps_reach
+
+    def close_pairs(
+        self,
+        view: ControlView,
+        idx: np.ndarray,
+        out: np.ndarray,
+        scene: Scene,
+        blockers: list[set[int]],
+    ) -> None:
+        """Of two skids already within their margins of each other whose commands, held
+        together, bring them into contact within the horizon, the one of lower rank stops
+        (in place on ``out``; the other is added to its ``blockers``).
+
+        Each skid's own check takes the others as standing still, and a skid inside its
+        margin is judged by its plain footprint (or it could never move away). Side by side
+        that is not enough: two skids 2 cm apart, one driving along the other's side while
+        the other's corner swings in, each safe against the other standing, touched on a
+        generated L bay. Rank as for giving way (:class:`~.recovery.GiveWay`): priority,
+        then nearer its goal, then lower index. The skid that goes on is safe against the
+        stopped one standing, so the pair parts. Stopping both (the joint check of the RVO
+        mode, for every pair) stalled pairs for good in this mode. If the stopped skid's
+        braking still meets the other's move, the other stops too.
+        """
+        moving = np.flatnonzero(np.any(out != 0.0, axis=1))
+        if len(moving) < 2:
+            return
+        rows = idx[moving]
+        grown = np.ascontiguousarray(scene.skids.grown[rows], dtype=float)
+        reach = 2.0 * self._max_circumradius(view.footprints) + 2.0 * self.params.margin_m
+        pairs = cKDTree(view.poses[rows, :2]).query_pairs(reach, output_type="ndarray")
+        if not len(pairs):
+            return
+        pairs = pairs.astype(np.int64)
+        now = np.ascontiguousarray(footprint_corners(view.poses[rows], grown)[:, None])
+        pairs = pairs[pairs_touching(pairs, now, TOUCH_TOLERANCE_M)]
+        if not len(pairs):
+            return
+        plain = np.ascontiguousarray(scene.skids.plain[rows], dtype=float)
+        T = len(self.times)
+
+        def touching(cmd: np.ndarray) -> np.ndarray:
+            pose = rollout(view, rows, cmd[:, 0], cmd[:, 1], self.times)
+            corners = rollout_corners(pose.reshape(-1, 3), plain, T).reshape(len(rows), T, 4, 2)
+            return pairs_touching(pairs, corners, TOUCH_TOLERANCE_M)
+
+        hit = touching(out[moving])
+        if not hit.any():
+            return
+        to_goal = np.linalg.norm(view.poses[rows, :2] - view.goals[rows, :2], axis=1)
+        key = np.lexsort((rows, np.nan_to_num(to_goal, nan=np.inf), -view.priority[rows]))
+        rank = np.empty(len(rows), int)
+        rank[key] = np.arange(len(rows))  # 0 = highest
+        for a, b in pairs[hit]:
+            lo, hi = (a, b) if rank[a] > rank[b] else (b, a)
+            out[moving[lo]] = 0.0
+            blockers[moving[lo]].add(int(rows[hi]))
+        again = touching(out[moving])
+        for a, b in pairs[again]:
+            out[moving[a]] = out[moving[b]] = 0.0
 
     def joint_check(
         self, view: ControlView, idx: np.ndarray, out: np.ndarray, body: np.ndarray
