@@ -117,3 +117,42 @@ def test_a_turn_into_a_wall_alongside_drives_on_straight():
     # Without the wall the turn is left alone.
     open_hall = make_view([[3.0, 5.24, -0.1]], vel=[[0.5, 0.0]])
     assert np.array_equal(_check(open_hall, raw, straight=True).commands, raw)
+
+
+def _joint_gap(view, cmd, steps: int = 20) -> float:
+    """Smallest gap between two skids driving ``cmd`` together for ``steps`` ticks."""
+    from shapely.geometry import Polygon
+
+    from swarmpark.core.geometry import footprint_corners
+
+    plain = np.stack([fp.corners_body() for fp in view.footprints])
+    gap = np.inf
+    for _ in range(steps):
+        view = advance(view, cmd)
+        a, b = footprint_corners(view.poses, plain)
+        gap = min(gap, Polygon(a).distance(Polygon(b)))
+    return gap
+
+
+def test_of_two_skids_side_by_side_whose_moves_together_touch_the_lower_rank_stops():
+    """Taken from a contact on a generated L bay: a 1.0 m skid drives east under the front
+    corner of a 1.4 m skid 3 cm above it, which drives on down past the first one's corner.
+    Each move is safe against the other standing; together the corner meets the side."""
+    from dataclasses import replace
+
+    from swarmpark.core.geometry import Footprint
+
+    poses = [[3.256, 2.985, 0.021], [3.279, 4.067, -0.427]]
+    goals = [[4.19, 3.82, np.pi / 2], [6.31, 2.45, np.pi / 2]]  # the first skid is nearer
+    raw = np.array([[0.25, 0.0], [0.25, 0.0]])
+    view = make_view(poses, goals, vel=[[0.1, 0.0], [0.025, 0.0]], dt=0.05)
+    view = replace(view, footprints=(Footprint(1.0, 0.7, 0.5), Footprint(1.4, 0.9, 0.7)))
+    assert _joint_gap(view, raw) == 0.0  # the commands as asked touch
+    res = _check(view, raw)
+    assert np.array_equal(res.commands[0], raw[0])  # the skid of higher rank goes on
+    assert np.array_equal(res.commands[1], [0.0, 0.0]) and res.blockers[1] == {0}
+    assert _joint_gap(view, res.commands) > 0.0
+    # Ranked the other way (priority first), the other one stops.
+    res = _check(replace(view, priority=np.array([1.0, 2.0])), raw)
+    assert np.array_equal(res.commands[0], [0.0, 0.0])
+    assert np.array_equal(res.commands[1], raw[1])
