@@ -1,14 +1,17 @@
 """The collision monitor on hand-built views: it leaves a free path alone, slows or stops before
 contact with walls, skids and people, and its rollout is the simulator's integration."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from navkit import advance, make_view
+from shapely.geometry import Polygon
 
 from swarmpark.control.nav.monitor import CollisionMonitor, rollout
 from swarmpark.control.nav.params import MonitorParams
 from swarmpark.control.nav.scene import Scene
-from swarmpark.core.geometry import integrate_unicycle
+from swarmpark.core.geometry import Footprint, footprint_corners, integrate_unicycle
 
 WALL = (4.0, 0.0, 4.3, 6.0)  # across the hall at x = 4 m
 
@@ -121,10 +124,6 @@ def test_a_turn_into_a_wall_alongside_drives_on_straight():
 
 def _joint_gap(view, cmd, steps: int = 20) -> float:
     """Smallest gap between two skids driving ``cmd`` together for ``steps`` ticks."""
-    from shapely.geometry import Polygon
-
-    from swarmpark.core.geometry import footprint_corners
-
     plain = np.stack([fp.corners_body() for fp in view.footprints])
     gap = np.inf
     for _ in range(steps):
@@ -138,10 +137,6 @@ def test_of_two_skids_side_by_side_whose_moves_together_touch_the_lower_rank_sto
     """Taken from a contact on a generated L bay: a 1.0 m skid drives east under the front
     corner of a 1.4 m skid 3 cm above it, which drives on down past the first one's corner.
     Each move is safe against the other standing; together the corner meets the side."""
-    from dataclasses import replace
-
-    from swarmpark.core.geometry import Footprint
-
     poses = [[3.256, 2.985, 0.021], [3.279, 4.067, -0.427]]
     goals = [[4.19, 3.82, np.pi / 2], [6.31, 2.45, np.pi / 2]]  # the first skid is nearer
     raw = np.array([[0.25, 0.0], [0.25, 0.0]])
