@@ -74,6 +74,17 @@ def rollout(
     )
 
 
+def _swept(
+    view: ControlView, rows: np.ndarray, cmd: np.ndarray, body: np.ndarray, times: np.ndarray
+) -> np.ndarray:
+    """Footprints ``(len(rows), T, 4, 2)`` of skids ``rows`` (body-frame corners ``body``)
+    at ``times`` under the commands ``cmd`` held (:func:`rollout`)."""
+    pose = rollout(view, rows, cmd[:, 0], cmd[:, 1], times)
+    return rollout_corners(pose.reshape(-1, 3), body, len(times)).reshape(
+        len(rows), len(times), 4, 2
+    )
+
+
 @dataclass(frozen=True)
 class MonitorResult:
     """The safe commands ``(len(idx), 2)``, per row the skids that slowed it at full speed
@@ -324,13 +335,15 @@ class CollisionMonitor:
         pairs = pairs[pairs_touching(pairs, now, TOUCH_TOLERANCE_M)]
         if not len(pairs):
             return
+        # Only the skids of those pairs are rolled out (most skids on the move have none).
+        members, inverse = np.unique(pairs.ravel(), return_inverse=True)
+        pairs = inverse.reshape(-1, 2).astype(np.int64)
+        moving, rows = moving[members], rows[members]
         plain = np.ascontiguousarray(scene.skids.plain[rows], dtype=float)
-        T = len(self.times)
 
         def touching(cmd: np.ndarray) -> np.ndarray:
-            pose = rollout(view, rows, cmd[:, 0], cmd[:, 1], self.times)
-            corners = rollout_corners(pose.reshape(-1, 3), plain, T).reshape(len(rows), T, 4, 2)
-            return pairs_touching(pairs, corners, TOUCH_TOLERANCE_M)
+            swept = _swept(view, rows, cmd, plain, self.times)
+            return pairs_touching(pairs, swept, TOUCH_TOLERANCE_M)
 
         hit = touching(out[moving])
         if not hit.any():
@@ -359,7 +372,6 @@ class CollisionMonitor:
         The stopped skids' braking is rolled out again, until no new pair is found.
         """
         times = self.times
-        T = len(times)
         reach = self._max_circumradius(view.footprints) * 2.0
         # Two skids closing at their current speed plus their top speed over the horizon.
         speed = np.abs(view.vel[idx, 0]).max(initial=0.0) + view.max_speed[idx].max()
@@ -370,16 +382,12 @@ class CollisionMonitor:
         corners, test, bad = None, pairs, np.zeros(0, dtype=int)
         while len(test):
             if corners is None:
-                pose = rollout(view, idx, out[:, 0], out[:, 1], times)
-                corners = rollout_corners(pose.reshape(-1, 3), body, T).reshape(len(idx), T, 4, 2)
+                corners = _swept(view, idx, out, body, times)
             else:
                 # Only the skids stopped in the last pass move differently: roll them out
                 # again, and test the pairs with one of them (the others' verdicts stand, and
                 # their skids were stopped already).
-                pose = rollout(view, idx[bad], out[bad, 0], out[bad, 1], times)
-                corners[bad] = rollout_corners(pose.reshape(-1, 3), body[bad], T).reshape(
-                    len(bad), T, 4, 2
-                )
+                corners[bad] = _swept(view, idx[bad], out[bad], body[bad], times)
                 moved = np.zeros(len(idx), dtype=bool)
                 moved[bad] = True
                 test = pairs[moved[pairs[:, 0]] | moved[pairs[:, 1]]]
