@@ -18,6 +18,7 @@ import shapely
 from scipy import ndimage
 from shapely.geometry import Polygon
 
+from swarmpark.core.geometry import footprint_polygon
 from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 
@@ -46,8 +47,6 @@ class Reach:
     """
 
     def __init__(self, goals: np.ndarray, fps, boundary: Polygon, grid: OccupancyGrid) -> None:
-        from swarmpark.core.geometry import footprint_polygon
-
         half = max(f.width_m for f in fps) / 2
         res = max(grid.resolution_m, BLOCKING_RESOLUTION_M)
         xmin, ymin, xmax, ymax = boundary.buffer(BLOCKING_CROP_M).bounds
