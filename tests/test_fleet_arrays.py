@@ -213,7 +213,7 @@ def test_the_sim_link_reports_each_robot_once_per_step_in_one_batch():
 def test_keep_right_facing_pairs_equal_the_per_skid_products():
     from scipy.spatial import cKDTree
 
-    from swarmpark.control.nav.avoidance import _facing
+    from swarmpark.control.nav.keep_right import _facing
 
     rng = np.random.default_rng(5)
     n = 300

@@ -11,13 +11,12 @@ without orders are immobile: everyone else takes the full share against them.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
+from swarmpark.control.nav.keep_right import keep_right_turns
 from swarmpark.control.nav.params import AvoidanceParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.control.orca.kernel import (
@@ -26,7 +25,6 @@ from swarmpark.control.orca.kernel import (
     holonomic_speed_limit,
     holonomic_to_unicycle,
     orca_step,
-    responsibility_shares,
     skid_shapes,
     tracking_error_bound,
     unicycle_to_holonomic,
@@ -67,29 +65,6 @@ class AvoidanceResult:
     commands: np.ndarray
     along: np.ndarray
     on_axis: np.ndarray
-
-
-def _facing(centres, u_pref, kk, i, j, cruising, others, near):
-    """Per pair (skid ``i`` = ``cruising[kk]``, mover ``j``): whether ``j`` is ahead of ``i``
-    (``(c_j - c_i) . u_i > 0``) and comes the other way (``u_j . u_i < 0``).
-
-    These were one matrix-vector product per skid (BLAS, which may fuse the multiply-add);
-    the two products summed here round differently, but the sign of the sum is the same
-    unless it is exactly zero, so the pairs of skids with a zero are decided again by their
-    skid's own matrix-vector products, and the result is the same as before."""
-    u = u_pref[i]
-    d = centres[j] - centres[i]
-    dot_a = d[:, 0] * u[:, 0] + d[:, 1] * u[:, 1]
-    dot_o = u_pref[j, 0] * u[:, 0] + u_pref[j, 1] * u[:, 1]
-    ahead, oncoming = dot_a > 0, dot_o < 0
-    for k in np.unique(kk[(dot_a == 0) | (dot_o == 0)]).tolist():
-        ic = cruising[k]
-        jk = others[near[k]]
-        jk = jk[jk != ic]
-        rows = np.flatnonzero(kk == k)  # the same movers, in the same order
-        ahead[rows] = (centres[jk] - centres[ic]) @ u_pref[ic] > 0
-        oncoming[rows] = u_pref[jk] @ u_pref[ic] < 0
-    return ahead, oncoming
 
 
 class OrcaAdapter:
@@ -217,40 +192,20 @@ class OrcaAdapter:
         movers: np.ndarray,
         scene: Scene,
     ) -> np.ndarray:
-        """Clockwise turn (rad) of each cruising skid's preferred velocity where another skid
-        on the move within ``keep_right_range_m`` ahead comes the other way (their preferred
-        velocities more than 90 degrees apart), else 0.
-
-        The turn is ``keep_right_rad`` times twice the skid's largest ORCA share against
-        those skids (:func:`~swarmpark.control.orca.kernel.responsibility_shares`), at most
-        ``keep_right_max_rad``: between equal priorities each turns ``keep_right_rad``, and
-        the lower priority turns more. It fades out near static solids.
-        """
+        """Clockwise turn (rad) of each cruising skid's preferred velocity
+        (:func:`.keep_right.keep_right_turns` with this mode's parameters)."""
         p = self.params
-        turn = np.zeros(len(cruising))
-        if p.keep_right_rad == 0 or movers.sum() < 2:
-            return turn
-        others = np.flatnonzero(movers)
-        near = cKDTree(centres[others]).query_ball_point(centres[cruising], p.keep_right_range_m)
-        # Every (cruising skid, mover near it) pair at once.
-        lens = np.fromiter(map(len, near), int, len(near))
-        kk = np.repeat(np.arange(len(cruising)), lens)
-        j = others[np.fromiter(itertools.chain.from_iterable(near), int, int(lens.sum()))]
-        i = cruising[kk]
-        kk, i, j = kk[j != i], i[j != i], j[j != i]
-        ahead, oncoming = _facing(centres, u_pref, kk, i, j, cruising, others, near)
-        meet = ahead & oncoming
-        if meet.any():
-            kk, i, j = kk[meet], i[meet], j[meet]
-            share = responsibility_shares(prio[i], prio[j], p.min_share)
-            best = np.full(len(cruising), -np.inf)
-            np.maximum.at(best, kk, share)  # the largest share per skid (exact in any order)
-            met = np.unique(kk)
-            turn[met] = np.minimum(2.0 * best[met] * p.keep_right_rad, p.keep_right_max_rad)
-        kd = scene.static.kd
-        if kd is not None and turn.any():
-            # Beyond keep_right_open_m the fade is 1 whatever the distance (inf included).
-            clear, _ = kd.query(centres[cruising], distance_upper_bound=p.keep_right_open_m)
-            fade = (clear - p.keep_right_tight_m) / (p.keep_right_open_m - p.keep_right_tight_m)
-            turn *= np.clip(fade, 0.0, 1.0)
-        return turn
+        return keep_right_turns(
+            centres,
+            u_pref,
+            prio,
+            cruising,
+            movers,
+            scene,
+            rad=p.keep_right_rad,
+            max_rad=p.keep_right_max_rad,
+            range_m=p.keep_right_range_m,
+            open_m=p.keep_right_open_m,
+            tight_m=p.keep_right_tight_m,
+            min_share=p.min_share,
+        )

@@ -28,6 +28,7 @@ from swarmpark.control.nav.field import PotentialField
 from swarmpark.control.nav.fleetmap import FleetState
 from swarmpark.control.nav.follower import PathFollower, PathState
 from swarmpark.control.nav.hold import hold_outside
+from swarmpark.control.nav.keep_right import KeepRight
 from swarmpark.control.nav.make_room import MakeRoom, RoomState, cut_off
 from swarmpark.control.nav.manoeuvre import ManoeuvrePlanner, ManoeuvreState
 from swarmpark.control.nav.monitor import CollisionMonitor, MonitorResult
@@ -93,6 +94,7 @@ class Navigator:
         self.manoeuvre = ManoeuvrePlanner(p.manoeuvre)
         self.traffic = TrafficControl(p.traffic)
         self.give_way = GiveWay(p.give_way)
+        self.keep_right = KeepRight(p.keep_right)
         self.make_room = MakeRoom(p.make_room)
         self.people = PeopleYield(p.people)
         self.ladder = DeadlockLadder(p.deadlock, p.backup, stall_s=stall_s)
@@ -163,6 +165,8 @@ class Navigator:
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
         waiting = self.follower.waiting(view, idx, paths)
         reverse = self.follower.update_ends(view, idx, final, paths)
+        if p.avoidance != "rvo":
+            targets = self._keep_right(view, idx, targets, final | waiting, fleet)
         raw, dist_goal = self.field.drive(
             self.people.field_view(view), idx, scene, targets, reverse, final, p.follower.approach_m
         )
@@ -259,6 +263,23 @@ class Navigator:
         if len(rows):
             free = self.people.without_people(view)
             cmd[rows] = self.monitor.check(free, rows, full[rows], self.scene).commands
+
+    def _keep_right(self, view, idx, targets, not_cruising, fleet) -> np.ndarray:
+        """Monitor mode: the lookahead points of skids ``idx`` following their paths, turned
+        clockwise where a skid on the move comes the other way (:mod:`.keep_right`). On the
+        move: active, not docked, not held back or queued, not stopped."""
+        full = view.goals.copy()
+        full[idx] = targets
+        docked = np.array([r.dock.docked for r in self.robots], dtype=bool)
+        movers = view.active & ~docked & ~fleet.waiting
+        if view.stopped is not None:
+            movers &= ~view.stopped
+        cruising = idx[~not_cruising]
+        cruising = cruising[movers[cruising]]
+        full = self.keep_right.turn_targets(
+            view.poses, full, view.goals, view.priority, cruising, movers, self.scene
+        )
+        return full[idx]
 
     def _settled(self, view: ControlView) -> tuple[np.ndarray, np.ndarray]:
         """RVO: the skids settled on their goal that can move, and the immobile ones (stopped,

@@ -26,6 +26,7 @@ __all__ = [
     "FollowerParams",
     "GiveWayParams",
     "HoldParams",
+    "KeepRightParams",
     "MakeRoomParams",
     "ManoeuvreParams",
     "MonitorParams",
@@ -493,6 +494,32 @@ class AvoidanceParams:
 
 
 @dataclass(frozen=True, kw_only=True)
+class KeepRightParams:
+    """Keep right in the monitor mode (:class:`.keep_right.KeepRight`): a skid following its
+    path with another skid on the move coming the other way within ``range_m`` ahead turns
+    its lookahead point ``rad`` clockwise about itself (times twice its share, the lower
+    priority the larger, at most ``max_rad``), fading out from static solids ``open_m`` away
+    to none at ``tight_m``. The RVO mode turns its preferred velocity with
+    :class:`AvoidanceParams`' ``keep_right_*``."""
+
+    enabled: bool = True
+    rad: float = 1.0
+    max_rad: float = float(np.pi / 2)
+    range_m: float = 4.0
+    open_m: float = 2.5
+    tight_m: float = 1.0
+    min_share: float = 0.1
+
+    def __post_init__(self) -> None:
+        _check(self, {"rad": ">=0", "max_rad": ">=0", "range_m": ">0"})
+        if not (_is_number(self.min_share) and 0 <= self.min_share <= 0.5):
+            raise ValueError(
+                f"KeepRightParams.min_share must be in [0, 0.5] (got {self.min_share!r})"
+            )
+        _order(self, "tight_m", "open_m")
+
+
+@dataclass(frozen=True, kw_only=True)
 class HoldParams:
     """Fill order: skids held back wait outside their parking boundary."""
 
@@ -573,6 +600,7 @@ class NavParams:
     deadlock: DeadlockParams = field(default_factory=DeadlockParams)
     make_room: MakeRoomParams = field(default_factory=MakeRoomParams)
     rvo: AvoidanceParams = field(default_factory=AvoidanceParams)
+    keep_right: KeepRightParams = field(default_factory=KeepRightParams)
     hold: HoldParams = field(default_factory=HoldParams)
     people: PeopleParams = field(default_factory=PeopleParams)
 
