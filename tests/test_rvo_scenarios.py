@@ -1,5 +1,7 @@
 """Velocity obstacles in the loop (issue 5): the scenarios of the 2015 and 2018 papers run with
-``navigation: {avoidance: rvo}``, and the rules around them (axis-only yielding, e-stop)."""
+``navigation: {avoidance: rvo}``, and the rules around them (axis-only yielding, e-stop). The
+scenario files run with the default stack (tests/test_nav_priority.py, tests/test_scenarios.py);
+here they get the key."""
 
 from pathlib import Path
 
@@ -11,9 +13,16 @@ from swarmpark.apps.run import run_world
 from swarmpark.control.orca.kernel import orca_step
 from swarmpark.core.geometry import Footprint, footprint_corners, rect_disc_gap
 from swarmpark.supervisor.core import Supervisor
-from swarmpark.world.scenario import build_world, load_scenario, parse_scenario
+from swarmpark.world.scenario import build_world, parse_scenario
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def rvo_world(name: str):
+    """Scenario ``name`` with ``navigation: {avoidance: rvo}``."""
+    data = yaml.safe_load((ROOT / name).read_text())
+    data["navigation"] = {**data.get("navigation", {}), "avoidance": "rvo"}
+    return build_world(parse_scenario(data, ROOT))
 
 
 def test_robots_held_on_their_axis_move_only_along_it():
@@ -30,7 +39,7 @@ def test_robots_held_on_their_axis_move_only_along_it():
 
 @pytest.mark.slow
 def test_fig6_pass_through_opens_and_restores_the_formation():
-    r = run_world(build_world(load_scenario(ROOT / "pass-through-fig6.yaml"))).result
+    r = run_world(rvo_world("pass-through-fig6.yaml")).result
     assert r["success"] and r["collisions"] == []
     robots = r["robots"]
     assert robots["runner"]["final_position_error_m"] <= 0.1
@@ -44,7 +53,7 @@ def test_fig6_pass_through_opens_and_restores_the_formation():
 
 @pytest.mark.slow
 def test_fig11_lower_priority_takes_the_larger_detour():
-    r = run_world(build_world(load_scenario(ROOT / "head-on-fig11.yaml"))).result
+    r = run_world(rvo_world("head-on-fig11.yaml")).result
     assert r["success"] and r["collisions"] == []
     low = r["robots"]["top"]["max_lateral_deviation_m"]
     high = r["robots"]["bottom"]["max_lateral_deviation_m"]
@@ -54,7 +63,7 @@ def test_fig11_lower_priority_takes_the_larger_detour():
 
 @pytest.mark.slow
 def test_person_walks_through_the_formation_without_contact_and_it_restores():
-    world = build_world(load_scenario(ROOT / "person-through-formation.yaml"))
+    world = rvo_world("person-through-formation.yaml")
     sup = Supervisor(world)
     corners = [fp.corners_body() for fp in sup.sim.footprints]
     start = sup.sim.poses.copy()
@@ -75,6 +84,7 @@ def test_person_walks_through_the_formation_without_contact_and_it_restores():
 
 def test_estop_overrides_rvo_and_making_room():
     data = yaml.safe_load((ROOT / "pass-through-fig6.yaml").read_text())
+    data["navigation"] = {"avoidance": "rvo"}
     data["commands"].append({"at_s": 12.0, "estop": True})
     data["duration_s"] = 14.0
     sup = Supervisor(build_world(parse_scenario(data, ROOT)))
@@ -92,7 +102,7 @@ def test_estop_overrides_rvo_and_making_room():
 
 @pytest.mark.slow
 def test_fig8_two_skids_swap_rooms_through_the_door():
-    r = run_world(build_world(load_scenario(ROOT / "room-swap-fig8.yaml"))).result
+    r = run_world(rvo_world("room-swap-fig8.yaml")).result
     assert r["success"] and r["collisions"] == []
     assert r["robots"]["a"]["final_pose"][:2] == pytest.approx([17.6, 6.0], abs=0.1)
     assert r["robots"]["b"]["final_pose"][:2] == pytest.approx([6.4, 4.0], abs=0.1)
@@ -107,7 +117,7 @@ def test_fig8_two_skids_swap_rooms_through_the_door():
 
 @pytest.mark.slow
 def test_twenty_skids_cross_a_circle_to_the_antipodal_points():
-    world = build_world(load_scenario(ROOT / "circle-20-antipodal.yaml"))
+    world = rvo_world("circle-20-antipodal.yaml")
     r = run_world(world).result
     assert r["success"] and r["collisions"] == []
     assert r["min_clearance_robot_m"] > 0.05

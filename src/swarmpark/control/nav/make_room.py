@@ -1,4 +1,9 @@
-"""Making room (RVO): a parked skid standing in another's way moves aside along its own axis.
+"""Making room: a parked skid standing in another's way moves aside along its own axis.
+
+With RVO every parked skid makes room for every skid on the move and every walking person. In
+the monitor mode (the default) a parked skid makes room only for skids of higher priority
+(2015 paper Fig. 6: a skid with priority passes through a parked formation); skids of equal
+priority keep their spots, and people are given way by :mod:`.people`.
 
 The corridors are the paths (rear to ``lookahead_m`` ahead) of the skids on the move and the
 walks of people, widened by the mover's half-width plus ``clearance_m``. A settled skid inside
@@ -63,16 +68,30 @@ class MakeRoom:
         steps = np.arange(1, n + 1) * params.shift_step_m
         self.shifts = np.concatenate([steps, -steps])  # candidate moves along the axis, m
 
-    def corridors(self, view: ControlView, settled, paths: list[PathState], scene: Scene):
-        """The ways the movers (skids not settled, walking people) will take (shapely)."""
+    def corridors(
+        self,
+        view: ControlView,
+        settled,
+        paths: list[PathState],
+        scene: Scene,
+        *,
+        above: float | None = None,
+    ):
+        """The ways the movers (skids not settled, walking people) will take (shapely); with
+        ``above``, only those of skids with a priority above it (and no people)."""
         p = self.params
         out = []
-        for j in np.flatnonzero(view.active & ~settled):
+        movers = view.active & ~settled
+        if above is not None:
+            movers &= view.priority > above
+        for j in np.flatnonzero(movers):
             line = path_ahead(view, j, paths[j], p.lookahead_m)
             half = view.footprints[j].width_m / 2 + p.clearance_m
             out.append(shapely.LineString(line).buffer(half, cap_style="flat"))
             # The skid itself as it stands (it may be turning on the spot).
             out.append(shapely.Polygon(scene.corners_now(view, j)).buffer(p.clearance_m))
+        if above is not None:
+            return out
         walking = (
             np.linalg.norm(view.people_vel, axis=1) > _WALKING_MPS if len(view.people_xy) else []
         )
@@ -90,19 +109,36 @@ class MakeRoom:
         paths: list[PathState],
         rooms: list[RoomState],
         scene: Scene,
+        *,
+        by_priority: bool = False,
     ) -> RoomResult:
-        """Speeds along the axis of the settled skids (``settled``) that stand in a way."""
+        """Speeds along the axis of the settled skids (``settled``) that stand in a way; with
+        ``by_priority``, only in the ways of skids of higher priority than their own."""
         n = len(view.poses)
         res = RoomResult(np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
         free = settled & ~view.stopped if view.stopped is not None else settled
         cand = np.flatnonzero(free)
         if not len(cand):
             return res  # no settled skid to move aside: the corridors are not needed
-        corridors = self.corridors(view, settled, paths, scene)
+        if not by_priority:
+            self._aside(view, cand, self.corridors(view, settled, paths, scene), rooms, scene, res)
+            return res
+        if not np.any(view.active & ~settled & (view.priority > view.priority[cand].min())):
+            for i in cand:
+                rooms[i].side = 0
+            return res  # nobody outranks a parked skid: nobody makes room (the usual park)
+        for level in np.unique(view.priority[cand]):
+            rows = cand[view.priority[cand] == level]
+            ways = self.corridors(view, settled, paths, scene, above=float(level))
+            self._aside(view, rows, ways, rooms, scene, res)
+        return res
+
+    def _aside(self, view, cand, corridors, rooms, scene, res: RoomResult) -> None:
+        """Fills ``res`` for the settled skids ``cand`` against the ways ``corridors``."""
         if not corridors:
             for i in cand:
                 rooms[i].side = 0
-            return res
+            return
         way = shapely.union_all(corridors)
         shapely.prepare(way)
         plain = scene.skids.plain
@@ -132,7 +168,6 @@ class MakeRoom:
                 -view.max_speed[i],
                 view.max_speed[i],
             )
-        return res
 
     def _nearest_free_shift(self, view, i, way, side: int, scene: Scene) -> float | None:
         """The smallest shift along skid ``i``'s axis clear of ``way`` and static solids, on

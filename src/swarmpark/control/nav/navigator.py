@@ -204,6 +204,7 @@ class Navigator:
             cmd[moving] = self._monitor(view, moving, full[moving], joint=True)
             self._guard_aside(view, moving[aside], full, cmd)
         else:
+            raw = self._make_room(view, idx, raw)
             docked_all = [r.dock.docked for r in self.robots]  # per robot, not per row
             raw = self.give_way.step(
                 view, idx, raw, dist_goal, self._states("give_way"), docked_all
@@ -280,6 +281,28 @@ class Navigator:
             view.poses, full, view.goals, view.priority, cruising, movers, self.scene
         )
         return full[idx]
+
+    def _make_room(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
+        """Monitor mode: parked skids in the way of a skid of higher priority move aside
+        along their axis (:mod:`.make_room`) and dock again once it has passed."""
+        settled, _ = self._settled(view)
+        room = self.make_room.step(
+            view,
+            settled,
+            self._states("path"),
+            self._states("room"),
+            self.scene,
+            by_priority=True,
+        )
+        self.making_room = room.aside
+        for i in np.flatnonzero(room.undock):
+            self.robots[i].dock.docked = False  # dock again precisely once the way is clear
+        rows = np.flatnonzero(room.aside[idx])
+        if len(rows):
+            raw = raw.copy()
+            raw[rows, 0] = room.speed[idx[rows]]
+            raw[rows, 1] = 0.0
+        return raw
 
     def _settled(self, view: ControlView) -> tuple[np.ndarray, np.ndarray]:
         """RVO: the skids settled on their goal that can move, and the immobile ones (stopped,

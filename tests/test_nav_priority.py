@@ -1,0 +1,124 @@
+"""The default stack (collision monitor) with priorities and oncoming traffic, no scenario key:
+skids meeting head-on keep right, parked skids make room for a skid of higher priority and
+only for one (issue 15, "one default stack"). The same scenarios with velocity obstacles are in
+tests/test_rvo_scenarios.py."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import make_world
+
+from swarmpark.apps.run import run_world
+from swarmpark.control.nav.follower import PathState
+from swarmpark.control.nav.make_room import MakeRoom, RoomState
+from swarmpark.control.nav.navigator import Navigator, NavParams
+from swarmpark.control.nav.params import KeepRightParams, MakeRoomParams
+from swarmpark.supervisor.core import Supervisor
+from swarmpark.world.scenario import build_world, load_scenario
+
+ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def _view(a_pose, b_pose, **kw):
+    world = make_world(robots=[{"id": "a", "pose": a_pose}, {"id": "b", "pose": b_pose}], **kw)
+    return Supervisor(world).view()
+
+
+@pytest.mark.parametrize(
+    ("y", "share"),
+    [(3.0, 1.0), (1.5, 1.0 / 3.0)],  # open (3 m from the walls), then 1.5 m from a wall
+)
+def test_oncoming_skids_turn_their_lookahead_points_clockwise(y, share):
+    # a heading +x, b 4 m ahead heading -x, each aiming 1.2 m ahead on its way.
+    view = _view([3.0, y, 0.0], [7.0, y, 180.0])
+    nav = Navigator(NavParams())
+    nav.scene.update(view)
+    targets = np.array([[4.2, y, 0.0], [5.8, y, np.pi]])
+    both, movers = np.array([0, 1]), np.array([True, True])
+
+    def turned(prio, u_targets=targets):
+        return nav.keep_right.turn_targets(
+            view.poses, u_targets, view.goals, np.asarray(prio, float), both, movers, nav.scene
+        )
+
+    out = turned([1.0, 1.0])
+    turn = nav.params.keep_right.rad * share
+    # Each turns right of its way by the same angle: a to -y, b (heading -x) to +y.
+    assert np.arctan2(out[0, 1] - y, out[0, 0] - 3.0) == pytest.approx(-turn)
+    assert np.arctan2(y - out[1, 1], 7.0 - out[1, 0]) == pytest.approx(-turn)
+    assert out[:, 2] == pytest.approx(targets[:, 2] - turn)
+    # The lower priority (b: a third of a's) turns more.
+    low = turned([3.0, 1.0])
+    assert abs(low[1, 1] - y) > 1.5 * abs(low[0, 1] - y) > 0.0
+    # Going the same way: no turn, the targets come back as they were.
+    same = np.array([[4.2, y, 0.0], [8.2, y, 0.0]])
+    assert np.array_equal(turned([1.0, 1.0], same), same)
+    # Off, nothing turns.
+    nav_off = Navigator(NavParams(keep_right=KeepRightParams(enabled=False)))
+    off = nav_off.keep_right.turn_targets(
+        view.poses, targets, view.goals, np.ones(2), both, movers, nav.scene
+    )
+    assert np.array_equal(off, targets)
+
+
+def test_a_parked_skid_makes_room_only_for_a_skid_of_higher_priority():
+    # b parked across a's way (heading +y at x = 5); a drives along +x through it.
+    view = _view([2.0, 3.0, 0.0], [5.0, 3.0, 90.0])
+    view.active[:] = True  # both have orders: a to the east, b its spot
+    nav = Navigator(NavParams())
+    nav.scene.update(view)
+    paths = [PathState(path=np.array([[2.0, 3.0], [8.0, 3.0]])), PathState()]
+    settled = np.array([False, True])
+    room = MakeRoom(MakeRoomParams())
+
+    def step(prio):
+        view.priority[:] = prio
+        return room.step(
+            view, settled, paths, [RoomState(), RoomState()], nav.scene, by_priority=True
+        )
+
+    same = step([0.0, 0.0])
+    assert not same.aside.any() and not same.speed.any()  # equal priority: b keeps its spot
+    lower = step([0.0, 5.0])
+    assert not lower.aside.any()  # a skid of lower priority does not move a parked one
+    higher = step([5.0, 0.0])
+    assert higher.aside[1] and abs(higher.speed[1]) > 0.1 and higher.undock[1]
+    assert not higher.aside[0]
+
+
+@pytest.mark.slow
+def test_head_on_without_a_key_the_lower_priority_takes_the_larger_detour():
+    world = build_world(load_scenario(ROOT / "head-on-fig11.yaml"))
+    assert world.scenario.navigation.avoidance == "monitor"
+    r = run_world(world).result
+    assert r["success"] and r["collisions"] == [] and r["deadlocks"] == []
+    low = r["robots"]["top"]["max_lateral_deviation_m"]
+    high = r["robots"]["bottom"]["max_lateral_deviation_m"]
+    assert low > 1.5 * high > 0.0
+    assert r["min_clearance_robot_m"] > 0.1
+
+
+@pytest.mark.slow
+def test_pass_through_without_a_key_the_formation_opens_and_restores():
+    world = build_world(load_scenario(ROOT / "pass-through-fig6.yaml"))
+    assert world.scenario.navigation.avoidance == "monitor"
+    r = run_world(world).result
+    assert r["success"] and r["collisions"] == [] and r["deadlocks"] == []
+    robots = r["robots"]
+    # The rows beside the runner's lane opened (> 0.2 m) and every skid is back on its spot.
+    for rid in ("p21", "p22", "p23", "p31", "p32", "p33"):
+        assert robots[rid]["max_lateral_deviation_m"] > 0.2, rid
+    for rid, s in robots.items():
+        assert s["final_position_error_m"] <= 0.05, rid
+
+
+@pytest.mark.slow
+def test_room_swap_without_a_key():
+    world = build_world(load_scenario(ROOT / "room-swap-fig8.yaml"))
+    assert world.scenario.navigation.avoidance == "monitor"
+    r = run_world(world).result
+    assert r["success"] and r["collisions"] == []
+    assert r["robots"]["a"]["final_pose"][:2] == pytest.approx([17.6, 6.0], abs=0.1)
+    assert r["robots"]["b"]["final_pose"][:2] == pytest.approx([6.4, 4.0], abs=0.1)
+    assert r["min_clearance_m"] > 0.0
