@@ -4,15 +4,16 @@ As in the 2018 paper (Sect. 3.4), each skid plans a least-cost path on the infla
 its assigned goal (:mod:`.planner`) and the potential field (:mod:`.field`) drives it along the
 path towards a lookahead pose (:mod:`.follower`); near the goal the docking manoeuvre
 (:mod:`.docking`) takes it to the exact pose. Skid-skid avoidance is either the collision
-monitor alone (:mod:`.monitor`, as Navigation2's, with right of way at bottlenecks) or ORCA
-(:mod:`.avoidance`, with :mod:`.make_room`) followed by the monitor. Skids held still or making
-no progress recover (:mod:`.recovery`). Shared geometry is in :mod:`.scene`, every tuning
-value in :mod:`.params`.
+monitor alone (:mod:`.monitor`, as Navigation2's, with right of way at bottlenecks, keep right
+on the field's aim, :mod:`.keep_right`, and parked skids making room for a skid of higher
+priority, :mod:`.make_room`) or ORCA (:mod:`.avoidance`, with :mod:`.make_room`) followed by
+the monitor. Skids held still or making no progress recover (:mod:`.recovery`). Shared
+geometry is in :mod:`.scene`, every tuning value in :mod:`.params`.
 
 One tick (:meth:`Navigator.compute`), in this order: bring the scene up to date, plan, follow,
-drive with the field, dock; then either give way and monitor, or make room, climb the
-deadlock ladder, run ORCA and monitor jointly; hold back skids waiting for the fill order;
-watch for stalls.
+keep right (monitor mode), drive with the field, dock; then either make room for priority,
+give way and monitor, or make room, climb the deadlock ladder, run ORCA and monitor jointly;
+hold back skids waiting for the fill order; watch for stalls.
 """
 
 from __future__ import annotations
