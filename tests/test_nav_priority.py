@@ -111,14 +111,3 @@ def test_pass_through_without_a_key_the_formation_opens_and_restores():
         assert robots[rid]["max_lateral_deviation_m"] > 0.2, rid
     for rid, s in robots.items():
         assert s["final_position_error_m"] <= 0.05, rid
-
-
-@pytest.mark.slow
-def test_room_swap_without_a_key():
-    world = build_world(load_scenario(ROOT / "room-swap-fig8.yaml"))
-    assert world.scenario.navigation.avoidance == "monitor"
-    r = run_world(world).result
-    assert r["success"] and r["collisions"] == []
-    assert r["robots"]["a"]["final_pose"][:2] == pytest.approx([17.6, 6.0], abs=0.1)
-    assert r["robots"]["b"]["final_pose"][:2] == pytest.approx([6.4, 4.0], abs=0.1)
-    assert r["min_clearance_m"] > 0.0

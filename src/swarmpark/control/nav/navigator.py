@@ -269,11 +269,16 @@ class Navigator:
     def _keep_right(self, view, idx, targets, not_cruising, fleet) -> np.ndarray:
         """Monitor mode: the lookahead points of skids ``idx`` following their paths, turned
         clockwise where a skid on the move comes the other way (:mod:`.keep_right`). On the
-        move: active, not docked, not held back or queued, not stopped."""
+        move: active, not docked, not held back or queued, not stopped, and farther than
+        ``keep_right.near_goal_m`` from its goal (nearer, it is parking)."""
         full = view.goals.copy()
         full[idx] = targets
         docked = np.array([r.dock.docked for r in self.robots], dtype=bool)
-        movers = view.active & ~docked & ~fleet.waiting
+        away = (
+            np.hypot(*(view.goals[:, :2] - view.poses[:, :2]).T)
+            > self.params.keep_right.near_goal_m
+        )
+        movers = view.active & ~docked & ~fleet.waiting & away
         if view.stopped is not None:
             movers &= ~view.stopped
         cruising = idx[~not_cruising]

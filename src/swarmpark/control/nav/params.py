@@ -499,8 +499,10 @@ class KeepRightParams:
     path with another skid on the move coming the other way within ``range_m`` ahead turns
     its lookahead point ``rad`` clockwise about itself (times twice its share, the lower
     priority the larger, at most ``max_rad``), fading out from static solids ``open_m`` away
-    to none at ``tight_m``. The RVO mode turns its preferred velocity with
-    :class:`AvoidanceParams`' ``keep_right_*``."""
+    to none at ``tight_m``. Within ``near_goal_m`` of its goal a skid is parking, not
+    travelling: it neither turns nor counts as oncoming traffic (in a block, neighbours backing
+    and running up towards their spots would turn each other off their lines). The RVO mode
+    turns its preferred velocity with :class:`AvoidanceParams`' ``keep_right_*``."""
 
     enabled: bool = True
     rad: float = 1.0
@@ -509,9 +511,10 @@ class KeepRightParams:
     open_m: float = 2.5
     tight_m: float = 1.0
     min_share: float = 0.1
+    near_goal_m: float = 2.0
 
     def __post_init__(self) -> None:
-        _check(self, {"rad": ">=0", "max_rad": ">=0", "range_m": ">0"})
+        _check(self, {"rad": ">=0", "max_rad": ">=0", "range_m": ">0", "near_goal_m": ">=0"})
         if not (_is_number(self.min_share) and 0 <= self.min_share <= 0.5):
             raise ValueError(
                 f"KeepRightParams.min_share must be in [0, 0.5] (got {self.min_share!r})"
