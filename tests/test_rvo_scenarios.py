@@ -1,7 +1,7 @@
 """Velocity obstacles in the loop (issue 5): the scenarios of the 2015 and 2018 papers run with
 ``navigation: {avoidance: rvo}``, and the rules around them (axis-only yielding, e-stop). The
-scenario files run with the default stack (tests/test_nav_priority.py, tests/test_scenarios.py);
-here they get the key."""
+files of head-on-fig11 and pass-through-fig6 run with the default stack (tests/test_nav_priority.py,
+tests/test_scenarios.py); here every scenario gets the key."""
 
 from pathlib import Path
 
