@@ -44,6 +44,17 @@ def _facing(centres, u_pref, kk, i, j, cruising, others, near):
     return ahead, oncoming
 
 
+def _one_way(u: np.ndarray) -> bool:
+    """Whether every direction of ``u`` ``(M, 2)`` lies within an arc narrower than 90 deg
+    (by a margin far above rounding), so that no two have a negative dot product: the usual
+    park, where the fleet drives one way, skips the neighbour search."""
+    ang = np.sort(np.arctan2(u[:, 1], u[:, 0]))
+    if len(ang) < 2:
+        return True
+    gaps = np.diff(np.append(ang, ang[0] + 2 * np.pi))
+    return bool(2 * np.pi - gaps.max() < np.pi / 2 - 1e-6)
+
+
 def keep_right_turns(
     centres: np.ndarray,
     u_pref: np.ndarray,
@@ -73,6 +84,8 @@ def keep_right_turns(
     if rad == 0 or movers.sum() < 2 or not len(cruising):
         return turn
     others = np.flatnonzero(movers)
+    if _one_way(u_pref[np.union1d(others, cruising)]):
+        return turn  # no two skids more than 90 deg apart: nobody comes the other way
     near = cKDTree(centres[others]).query_ball_point(centres[cruising], range_m)
     # Every (cruising skid, mover near it) pair at once.
     lens = np.fromiter(map(len, near), int, len(near))
