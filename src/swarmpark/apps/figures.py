@@ -87,6 +87,13 @@ def _run(name: str, quick: bool, **update):
     return run_world(build_world(_scenario(name, quick, **update)))
 
 
+def _rvo(name: str):
+    """Scenario ``name``'s navigation block with ``avoidance: rvo``: the papers' figures are
+    reproduced with their method, also where the scenario file runs the default stack."""
+    nav = load_scenario(SCENARIOS / f"{name}.yaml").navigation
+    return nav.model_copy(update={"avoidance": "rvo"})
+
+
 def _fmt(v, spec: str = ".1f", none: str = "-") -> str:
     return none if v is None else format(v, spec)
 
@@ -306,7 +313,7 @@ def _navigation(img: Path, quick: bool) -> list[FidelityRow]:
             f"{_outcome(r)}, closest {_fmt(r['min_clearance_m'], '.2f')} m",
         )
     )
-    r = _run("head-on-fig11", quick).result
+    r = _run("head-on-fig11", quick, navigation=_rvo("head-on-fig11")).result
     low = r["robots"]["top"]["max_lateral_deviation_m"]
     high = r["robots"]["bottom"]["max_lateral_deviation_m"]
     rows.append(
@@ -318,7 +325,7 @@ def _navigation(img: Path, quick: bool) -> list[FidelityRow]:
             f"{_fmt(high, '.2f')} m; {_outcome(r)}",
         )
     )
-    r = _run("pass-through-fig6", quick).result
+    r = _run("pass-through-fig6", quick, navigation=_rvo("pass-through-fig6")).result
     rows.append(
         FidelityRow(
             "Hing 2015 Fig. 6 (bottom): a skid drives through a parked 3 x 3 formation",
