@@ -111,3 +111,41 @@ def test_pass_through_without_a_key_the_formation_opens_and_restores():
         assert robots[rid]["max_lateral_deviation_m"] > 0.2, rid
     for rid, s in robots.items():
         assert s["final_position_error_m"] <= 0.05, rid
+
+
+def test_skipping_the_search_for_a_one_way_fleet_changes_no_turn(monkeypatch):
+    # Random fleets, some driving one way (within 80 deg), some every way: the turns with the
+    # shortcut equal those of the full neighbour search.
+    from swarmpark.control.nav import keep_right as kr
+
+    view = _view([2.0, 1.0, 0.0], [8.0, 5.0, 0.0])
+    nav = Navigator(NavParams())
+    nav.scene.update(view)
+    rng = np.random.default_rng(3)
+    p = nav.params.keep_right
+    kw = dict(
+        rad=p.rad,
+        max_rad=p.max_rad,
+        range_m=p.range_m,
+        open_m=p.open_m,
+        tight_m=p.tight_m,
+        min_share=p.min_share,
+    )
+    skipped = turned = 0
+    for spread in [np.radians(80.0), 2 * np.pi] * 10:
+        n = 12
+        centres = rng.uniform([1.0, 1.0], [9.0, 5.0], size=(n, 2))
+        ang = rng.uniform(0.0, spread, n)
+        u = np.column_stack([np.cos(ang), np.sin(ang)])
+        prio = rng.integers(0, 3, n).astype(float)
+        cruising = np.flatnonzero(rng.random(n) < 0.7)
+        movers = rng.random(n) < 0.8
+        fast = kr.keep_right_turns(centres, u, prio, cruising, movers, nav.scene, **kw)
+        monkeypatch.setattr(kr, "_one_way", lambda u: False)
+        full = kr.keep_right_turns(centres, u, prio, cruising, movers, nav.scene, **kw)
+        monkeypatch.undo()
+        assert np.array_equal(fast, full)
+        turned += bool(full.any())
+        skipped += kr._one_way(u[np.union1d(np.flatnonzero(movers), cruising)])
+    assert 0 < skipped < 20  # both ways were taken ...
+    assert turned > 0  # ... and some skids did turn
