@@ -123,14 +123,6 @@ def test_skipping_the_search_for_a_one_way_fleet_changes_no_turn(monkeypatch):
     nav.scene.update(view)
     rng = np.random.default_rng(3)
     p = nav.params.keep_right
-    kw = dict(
-        rad=p.rad,
-        max_rad=p.max_rad,
-        range_m=p.range_m,
-        open_m=p.open_m,
-        tight_m=p.tight_m,
-        min_share=p.min_share,
-    )
     skipped = turned = 0
     for spread in [np.radians(80.0), 2 * np.pi] * 10:
         n = 12
@@ -140,9 +132,9 @@ def test_skipping_the_search_for_a_one_way_fleet_changes_no_turn(monkeypatch):
         prio = rng.integers(0, 3, n).astype(float)
         cruising = np.flatnonzero(rng.random(n) < 0.7)
         movers = rng.random(n) < 0.8
-        fast = kr.keep_right_turns(centres, u, prio, cruising, movers, nav.scene, **kw)
+        fast = kr.keep_right_turns(centres, u, prio, cruising, movers, nav.scene, p)
         monkeypatch.setattr(kr, "_one_way", lambda u: False)
-        full = kr.keep_right_turns(centres, u, prio, cruising, movers, nav.scene, **kw)
+        full = kr.keep_right_turns(centres, u, prio, cruising, movers, nav.scene, p)
         monkeypatch.undo()
         assert np.array_equal(fast, full)
         turned += bool(full.any())

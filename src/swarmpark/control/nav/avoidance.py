@@ -17,7 +17,7 @@ import numpy as np
 
 from swarmpark.control.base import ControlView
 from swarmpark.control.nav.keep_right import keep_right_turns
-from swarmpark.control.nav.params import AvoidanceParams
+from swarmpark.control.nav.params import AvoidanceParams, KeepRightParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.control.orca.kernel import (
     OrcaParams,
@@ -96,6 +96,14 @@ class OrcaAdapter:
         self.sidestep_rad = sidestep_rad
         self.back_speed_share = back_speed_share
         self.orca = OrcaParams(min_share=params.min_share, time_horizon_s=params.horizon_s)
+        self._keep_right = KeepRightParams(
+            rad=params.keep_right_rad,
+            max_rad=params.keep_right_max_rad,
+            range_m=params.keep_right_range_m,
+            open_m=params.keep_right_open_m,
+            tight_m=params.keep_right_tight_m,
+            min_share=params.min_share,
+        )
 
     def step(
         self,
@@ -194,18 +202,4 @@ class OrcaAdapter:
     ) -> np.ndarray:
         """Clockwise turn (rad) of each cruising skid's preferred velocity
         (:func:`.keep_right.keep_right_turns` with this mode's parameters)."""
-        p = self.params
-        return keep_right_turns(
-            centres,
-            u_pref,
-            prio,
-            cruising,
-            movers,
-            scene,
-            rad=p.keep_right_rad,
-            max_rad=p.keep_right_max_rad,
-            range_m=p.keep_right_range_m,
-            open_m=p.keep_right_open_m,
-            tight_m=p.keep_right_tight_m,
-            min_share=p.min_share,
-        )
+        return keep_right_turns(centres, u_pref, prio, cruising, movers, scene, self._keep_right)

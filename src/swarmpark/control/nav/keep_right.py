@@ -62,24 +62,21 @@ def keep_right_turns(
     cruising: np.ndarray,
     movers: np.ndarray,
     scene: Scene,
-    *,
-    rad: float,
-    max_rad: float,
-    range_m: float,
-    open_m: float,
-    tight_m: float,
-    min_share: float,
+    params: KeepRightParams,
 ) -> np.ndarray:
     """Clockwise turn (rad) of each cruising skid's wanted direction where another skid on the
-    move (``movers``) within ``range_m`` ahead comes the other way (their wanted directions
-    ``u_pref`` more than 90 degrees apart), else 0.
+    move (``movers``) within ``params.range_m`` ahead comes the other way (their wanted
+    directions ``u_pref`` more than 90 degrees apart), else 0.
 
-    The turn is ``rad`` times twice the skid's largest share against those skids
+    The turn is ``params.rad`` times twice the skid's largest share against those skids
     (:func:`~swarmpark.control.orca.kernel.responsibility_shares`, clipped to ``min_share``),
     at most ``max_rad``: between equal priorities each turns ``rad``, and the lower priority
     turns more. It fades out from static solids ``open_m`` away to none at ``tight_m`` (in a
-    door both keeping right would wedge on the jambs).
+    door both keeping right would wedge on the jambs). ``enabled`` and ``near_goal_m`` are
+    the caller's to apply.
     """
+    rad, max_rad, range_m = params.rad, params.max_rad, params.range_m
+    open_m, tight_m, min_share = params.open_m, params.tight_m, params.min_share
     turn = np.zeros(len(cruising))
     if rad == 0 or movers.sum() < 2 or not len(cruising):
         return turn
@@ -144,20 +141,7 @@ class KeepRight:
         aim[cruising] = targets[cruising, :2]
         d = aim - poses[:, :2]
         u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
-        turn = keep_right_turns(
-            poses[:, :2],
-            u,
-            prio,
-            cruising,
-            movers,
-            scene,
-            rad=p.rad,
-            max_rad=p.max_rad,
-            range_m=p.range_m,
-            open_m=p.open_m,
-            tight_m=p.tight_m,
-            min_share=p.min_share,
-        )
+        turn = keep_right_turns(poses[:, :2], u, prio, cruising, movers, scene, p)
         k = np.flatnonzero(turn)
         if len(k):
             out = targets.copy()
