@@ -69,8 +69,13 @@ class FidelityRow:
     swarmpark: str
 
 
-def _scenario(name: str, quick: bool, **update) -> Scenario:
+def _scenario(name: str, quick: bool, *, rvo: bool = False, **update) -> Scenario:
+    """Scenario ``name``, cut short if ``quick``, with ``update``; ``rvo``: with
+    ``navigation.avoidance: rvo`` (the papers' figures are reproduced with their method, also
+    where the scenario file runs the default stack)."""
     scn = load_scenario(SCENARIOS / f"{name}.yaml")
+    if rvo:
+        update["navigation"] = scn.navigation.model_copy(update={"avoidance": "rvo"})
     if quick:  # cut short: what would happen after the end is left out
         cut = min(scn.duration_s, QUICK_DURATION_S)
         update["duration_s"] = cut
@@ -81,17 +86,10 @@ def _scenario(name: str, quick: bool, **update) -> Scenario:
     return scn.model_copy(update=update) if update else scn
 
 
-def _run(name: str, quick: bool, **update):
+def _run(name: str, quick: bool, **kw):
     from swarmpark.apps.run import run_world
 
-    return run_world(build_world(_scenario(name, quick, **update)))
-
-
-def _rvo(name: str):
-    """Scenario ``name``'s navigation block with ``avoidance: rvo``: the papers' figures are
-    reproduced with their method, also where the scenario file runs the default stack."""
-    nav = load_scenario(SCENARIOS / f"{name}.yaml").navigation
-    return nav.model_copy(update={"avoidance": "rvo"})
+    return run_world(build_world(_scenario(name, quick, **kw)))
 
 
 def _fmt(v, spec: str = ".1f", none: str = "-") -> str:
@@ -313,7 +311,7 @@ def _navigation(img: Path, quick: bool) -> list[FidelityRow]:
             f"{_outcome(r)}, closest {_fmt(r['min_clearance_m'], '.2f')} m",
         )
     )
-    r = _run("head-on-fig11", quick, navigation=_rvo("head-on-fig11")).result
+    r = _run("head-on-fig11", quick, rvo=True).result
     low = r["robots"]["top"]["max_lateral_deviation_m"]
     high = r["robots"]["bottom"]["max_lateral_deviation_m"]
     rows.append(
@@ -325,7 +323,7 @@ def _navigation(img: Path, quick: bool) -> list[FidelityRow]:
             f"{_fmt(high, '.2f')} m; {_outcome(r)}",
         )
     )
-    r = _run("pass-through-fig6", quick, navigation=_rvo("pass-through-fig6")).result
+    r = _run("pass-through-fig6", quick, rvo=True).result
     rows.append(
         FidelityRow(
             "Hing 2015 Fig. 6 (bottom): a skid drives through a parked 3 x 3 formation",

@@ -166,15 +166,17 @@ class Navigator:
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
         waiting = self.follower.waiting(view, idx, paths)
         reverse = self.follower.update_ends(view, idx, final, paths)
+        # Docked now (before this tick's docking step), per robot.
+        docked_now = np.array([r.dock.docked for r in self.robots], dtype=bool)
         if p.avoidance != "rvo":
-            targets = self._keep_right(view, idx, targets, final | waiting, fleet)
+            targets = self._keep_right(view, idx, targets, final | waiting, fleet, docked_now)
         raw, dist_goal = self.field.drive(
             self.people.field_view(view), idx, scene, targets, reverse, final, p.follower.approach_m
         )
         raw[waiting] = 0.0
         # A skid stuck for a while drives a planned manoeuvre instead (not docked, not held
         # back by the fill order or queued at a door: fleet.waiting).
-        docked = np.array([self.robots[i].dock.docked for i in idx], dtype=bool)
+        docked = docked_now[idx]
         man_states = self._states("manoeuvre")
         # With RVO the deadlock ladder is the recovery: manoeuvres on top of it made the
         # 20-skid circle slower (126.7 s against 86.7 s without them).
@@ -266,14 +268,14 @@ class Navigator:
             free = self.people.without_people(view)
             cmd[rows] = self.monitor.check(free, rows, full[rows], self.scene).commands
 
-    def _keep_right(self, view, idx, targets, not_cruising, fleet) -> np.ndarray:
+    def _keep_right(self, view, idx, targets, not_cruising, fleet, docked) -> np.ndarray:
         """Monitor mode: the lookahead points of skids ``idx`` following their paths, turned
         clockwise where a skid on the move comes the other way (:mod:`.keep_right`). On the
         move: active, not docked, not held back or queued, not stopped, and farther than
-        ``keep_right.near_goal_m`` from its goal (nearer, it is parking)."""
+        ``keep_right.near_goal_m`` from its goal (nearer, it is parking). ``docked``: per
+        robot."""
         full = view.goals.copy()
         full[idx] = targets
-        docked = np.array([r.dock.docked for r in self.robots], dtype=bool)
         away = (
             np.hypot(*(view.goals[:, :2] - view.poses[:, :2]).T)
             > self.params.keep_right.near_goal_m

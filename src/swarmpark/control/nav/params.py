@@ -48,6 +48,7 @@ _RULES = {
     ">=0": (lambda v: _is_number(v) and np.isfinite(v) and v >= 0, "a finite number >= 0"),
     "int>0": (lambda v: isinstance(v, int | np.integer) and v > 0, "an integer > 0"),
     "share": (lambda v: _is_number(v) and 0 <= v <= 1, "a number in [0, 1]"),
+    "half share": (lambda v: _is_number(v) and 0 <= v <= 0.5, "in [0, 0.5]"),
 }
 
 
@@ -485,11 +486,7 @@ class AvoidanceParams:
     def __post_init__(self) -> None:
         _check(self, {"parked_priority": ">=0", "lookahead_m": ">0", "keep_right_rad": ">=0"})
         _check(self, {"keep_right_max_rad": ">=0", "keep_right_range_m": ">0"})
-        _check(self, {"margin_m": ">=0", "horizon_s": ">0"})
-        if not (_is_number(self.min_share) and 0 <= self.min_share <= 0.5):
-            raise ValueError(
-                f"AvoidanceParams.min_share must be in [0, 0.5] (got {self.min_share!r})"
-            )
+        _check(self, {"margin_m": ">=0", "horizon_s": ">0", "min_share": "half share"})
         _order(self, "keep_right_tight_m", "keep_right_open_m")
 
 
@@ -515,10 +512,7 @@ class KeepRightParams:
 
     def __post_init__(self) -> None:
         _check(self, {"rad": ">=0", "max_rad": ">=0", "range_m": ">0", "near_goal_m": ">=0"})
-        if not (_is_number(self.min_share) and 0 <= self.min_share <= 0.5):
-            raise ValueError(
-                f"KeepRightParams.min_share must be in [0, 0.5] (got {self.min_share!r})"
-            )
+        _check(self, {"min_share": "half share"})
         _order(self, "tight_m", "open_m")
 
 
