@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 from helpers import make_world
 
+from swarmpark.apps.generate import generate
 from swarmpark.apps.run import run_world
 from swarmpark.control.nav.follower import PathState
 from swarmpark.control.nav.make_room import MakeRoom, RoomState
-from swarmpark.control.nav.navigator import Navigator, NavParams
+from swarmpark.control.nav.navigator import Navigator, NavParams, RobotNav
 from swarmpark.control.nav.params import KeepRightParams, MakeRoomParams
 from swarmpark.supervisor.core import Supervisor
-from swarmpark.world.scenario import build_world, load_scenario
+from swarmpark.world.scenario import build_world, load_scenario, parse_scenario
 
 ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -85,6 +86,54 @@ def test_a_parked_skid_makes_room_only_for_a_skid_of_higher_priority():
     higher = step([5.0, 0.0])
     assert higher.aside[1] and abs(higher.speed[1]) > 0.1 and higher.undock[1]
     assert not higher.aside[0]
+
+
+def test_a_walled_in_skid_ranks_above_all_until_it_docks_and_parked_skids_make_room():
+    # b parked across a's way, equal priorities: b keeps its spot, until a's manoeuvre
+    # search finds no way round it (a is walled in); then a outranks b and b moves aside.
+    view = _view([2.0, 3.0, 0.0], [5.0, 3.0, 90.0])
+    view.active[:] = True
+    nav = Navigator(NavParams())
+    nav.robots = [RobotNav(), RobotNav()]
+    nav.scene.update(view)
+    paths = [PathState(path=np.array([[2.0, 3.0], [8.0, 3.0]])), PathState()]
+    settled = np.array([False, True])
+
+    def room_for(v):
+        rooms = [RoomState(), RoomState()]
+        return nav.make_room.step(v, settled, paths, rooms, nav.scene, by_priority=True)
+
+    assert nav._inherit(view) is view  # nobody walled in: the view as it was
+    assert not room_for(view).aside.any()
+    nav.robots[0].manoeuvre.walled = True
+    ranked = nav._inherit(view)
+    assert ranked.priority[0] > ranked.priority[1] == view.priority[1]
+    moved = room_for(ranked)
+    assert moved.aside[1] and abs(moved.speed[1]) > 0.1 and moved.undock[1]
+    # Docked on its goal (or given a new one), a is walled in no more.
+    nav.robots[0].dock.docked = True
+    assert nav._inherit(view) is view and not nav.robots[0].manoeuvre.walled
+    # Off: the ranks stay as they were.
+    off = Navigator(NavParams(make_room=MakeRoomParams(for_walled=False)))
+    off.robots = [RobotNav(), RobotNav()]
+    off.robots[0].manoeuvre.walled = True
+    assert off._inherit(view) is view
+
+
+@pytest.mark.slow
+def test_a_walled_in_spot_is_reached_once_a_neighbour_makes_room():
+    # Generated open deck (training seed 2005), truth localization: two rows of three spots
+    # facing east, 0.3-0.5 m apart, so a middle spot is entered along its axis only. Its skid
+    # arrives last, between parked neighbours: walled in, it outranks them, an end skid backs
+    # out of the row and docks again. Without the rule it stays 0.58 m off its spot.
+    data = generate("open-deck", 2005, robots=6)
+    data.pop("sensing")
+    r = run_world(build_world(parse_scenario(data))).result
+    assert r["success"] and r["collisions"] == []
+    assert all(s["final_position_error_m"] <= 0.05 for s in r["robots"].values())
+    off = Navigator(NavParams(make_room=MakeRoomParams(for_walled=False)))
+    r_off = run_world(build_world(parse_scenario(data)), controller=off).result
+    assert not r_off["success"]
 
 
 @pytest.mark.slow

@@ -3,7 +3,9 @@
 With RVO every parked skid makes room for every skid on the move and every walking person. In
 the monitor mode (the default) a parked skid makes room only for skids of higher priority
 (2015 paper Fig. 6: a skid with priority passes through a parked formation); skids of equal
-priority keep their spots, and people are given way by :mod:`.people`.
+priority keep their spots, and people are given way by :mod:`.people`. A skid walled in by
+parked skids (no manoeuvre to its spot round them, one without them) ranks above all others
+until it docks (the navigator's priority inheritance), so its parked neighbours make room.
 
 The corridors are the paths (rear to ``lookahead_m`` ahead) of the skids on the move and the
 walks of people, widened by the mover's half-width plus ``clearance_m``. A settled skid inside

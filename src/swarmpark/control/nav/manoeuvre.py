@@ -47,6 +47,9 @@ class ManoeuvreState:
     #: How many manoeuvres were planned and how many found no way (for the run report).
     planned: int = 0
     failed: int = 0
+    #: The last search for its goal found no way round the skids standing (it stays walled
+    #: in until it docks or its goal changes: the navigator ranks it above the others).
+    walled: bool = False
 
     def running(self) -> bool:
         return self.segments is not None
@@ -77,10 +80,12 @@ class ManoeuvrePlanner:
         raw: np.ndarray,
         states: list[ManoeuvreState],
         eligible: np.ndarray,
+        parked: np.ndarray | None = None,
     ) -> np.ndarray:
         """Replace the commands ``raw`` (rows of ``idx``) of the skids in a manoeuvre; start
         one for an ``eligible`` skid that made no progress for ``stuck_s``. Returns which rows
-        are manoeuvring."""
+        are manoeuvring. ``parked`` ``(N,)``: the skids that could make room; a skid for which
+        no manoeuvre is found but one is without them is marked walled in."""
         p = self.params
         out = np.zeros(len(idx), dtype=bool)
         pose, goal = view.poses[idx], view.goals[idx]
@@ -108,7 +113,7 @@ class ManoeuvrePlanner:
             if not st.running():
                 if view.t - st.best_t < p.stuck_s or view.t < st.retry_t:
                     continue
-                self._start(view, i, st)
+                self._start(view, i, st, parked)
                 if not st.running():
                     continue
             cmd = self._drive(view, i, st)
@@ -150,9 +155,10 @@ class ManoeuvrePlanner:
 
     # ------------------------------------------------------------------ planning
 
-    def _window(self, view: ControlView, i: int):
+    def _window(self, view: ControlView, i: int, leave_out: np.ndarray | None = None):
         """The occupancy of the window around skid ``i`` and its goal: the map, the other
-        skids where they stand (grown by ``skid_margin_m``) and the people."""
+        skids where they stand (grown by ``skid_margin_m``; not those in ``leave_out``) and the
+        people."""
         p = self.params
         grid = view.grid
         res = grid.resolution_m
@@ -171,7 +177,7 @@ class ManoeuvrePlanner:
         occ = grid.occupied[r0:r1, c0:c1].copy()
         origin = np.array([grid.origin[0] + c0 * res, grid.origin[1] + r0 * res])
         for j in range(len(view.poses)):
-            if j != i:
+            if j != i and (leave_out is None or not leave_out[j]):
                 stamp_footprint(
                     occ, origin, res, view.poses[j], view.footprints[j], p.skid_margin_m
                 )
@@ -181,7 +187,9 @@ class ManoeuvrePlanner:
             occ |= d <= rad + p.person_margin_m
         return occ, origin, res
 
-    def _start(self, view: ControlView, i: int, st: ManoeuvreState) -> None:
+    def _start(
+        self, view: ControlView, i: int, st: ManoeuvreState, parked: np.ndarray | None = None
+    ) -> None:
         p = self.params
         win = self._window(view, i)
         st.planned += 1
@@ -198,6 +206,11 @@ class ManoeuvrePlanner:
                     break
         if not segments:
             st.failed += 1
+            # Walled in by parked skids: a way exists with them left out.
+            others = parked is not None and np.any(np.delete(parked, i))
+            if win is not None and others and not st.walled:
+                occ = self._window(view, i, leave_out=parked)
+                st.walled = bool(self._plan(view, i, *occ, p.grow_m))
             st.stop(view.t, p.retry_s)
             return
         st.segments, st.seg, st.blocked_s = segments, 0, 0.0

@@ -5,9 +5,9 @@ its assigned goal (:mod:`.planner`) and the potential field (:mod:`.field`) driv
 path towards a lookahead pose (:mod:`.follower`); near the goal the docking manoeuvre
 (:mod:`.docking`) takes it to the exact pose. Skid-skid avoidance is either the collision
 monitor alone (:mod:`.monitor`, as Navigation2's, with right of way at bottlenecks, keep right
-on the field's aim, :mod:`.keep_right`, and parked skids making room for a skid of higher
-priority, :mod:`.make_room`) or ORCA (:mod:`.avoidance`, with :mod:`.make_room`) followed by
-the monitor. Skids held still or making no progress recover (:mod:`.recovery`). Shared
+on the field's aim, :mod:`.keep_right`, and parked skids making room, :mod:`.make_room`, for a
+skid of higher priority or one walled in by parked skids, which ranks above the others until it
+docks) or ORCA (:mod:`.avoidance`, with :mod:`.make_room`) followed by the monitor. Skids held still or making no progress recover (:mod:`.recovery`). Shared
 geometry is in :mod:`.scene`, every tuning value in :mod:`.params`.
 
 One tick (:meth:`Navigator.compute`), in this order: bring the scene up to date, plan, follow,
@@ -18,7 +18,7 @@ hold back skids waiting for the fill order; watch for stalls.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -156,6 +156,7 @@ class Navigator:
         idx = np.flatnonzero(view.active)
         if len(idx) == 0:
             return cmd
+        view = self._inherit(view)
         scene = self.scene.update(view)
         paths = self._states("path")
         if p.avoidance == "rvo":
@@ -182,7 +183,9 @@ class Navigator:
         # 20-skid circle slower (126.7 s against 86.7 s without them).
         use = p.manoeuvre.enabled and p.avoidance != "rvo"
         eligible = ~docked & ~waiting & ~fleet.waiting[idx] & use
-        man = self.manoeuvre.step(view, idx, raw, man_states, eligible)
+        # Walled in is judged against the settled skids, which could make room.
+        movable = self._settled(view)[0] if p.make_room.for_walled else None
+        man = self.manoeuvre.step(view, idx, raw, man_states, eligible, movable)
         for i in idx[man]:
             self.robots[i].dock.runup = False  # the docking starts afresh after it
         mraw = raw[man].copy()
@@ -243,6 +246,8 @@ class Navigator:
             return "no path to its goal on the known map", []
         if r.manoeuvre.running():
             return "manoeuvring towards its goal", []
+        if r.manoeuvre.walled:
+            return "walled in by parked skids (they make room for it)", []
         blockers = sorted(r.give_way.blockers)
         if blockers:
             return "held by the collision monitor before other skids", blockers
@@ -267,6 +272,24 @@ class Navigator:
         if len(rows):
             free = self.people.without_people(view)
             cmd[rows] = self.monitor.check(free, rows, full[rows], self.scene).commands
+
+    def _inherit(self, view: ControlView) -> ControlView:
+        """Monitor mode: the view with walled-in skids ranked above all others (until they
+        dock or get a new goal), so that parked skids in their way make room."""
+        p = self.params
+        if not p.make_room.for_walled or p.avoidance == "rvo":
+            return view
+        walled = np.zeros(len(view.poses), dtype=bool)
+        for i, r in enumerate(self.robots[: len(view.poses)]):
+            st = r.manoeuvre
+            if st.walled and (r.dock.docked or view.goal_changed[i] or not view.active[i]):
+                st.walled = False
+            walled[i] = st.walled
+        if not walled.any():
+            return view
+        pr = np.asarray(view.priority, dtype=float).copy()
+        pr[walled] = pr.max() + 1.0
+        return replace(view, priority=pr)
 
     def _keep_right(self, view, idx, targets, not_cruising, fleet, docked) -> np.ndarray:
         """Monitor mode: the lookahead points of skids ``idx`` following their paths, turned

@@ -432,7 +432,8 @@ class DeadlockParams:
 
 @dataclass(frozen=True, kw_only=True)
 class MakeRoomParams:
-    """Making room with RVO (:mod:`.make_room`)."""
+    """Making room (:mod:`.make_room`): with RVO for every mover, in monitor mode for a skid of
+    higher priority or a walled-in one."""
 
     #: A parked skid in the corridor another skid will sweep (its path from its rear to this
     #: far ahead) or a walking person will cross (this far along their velocity) moves aside.
@@ -449,6 +450,10 @@ class MakeRoomParams:
     shift_max_m: float = 2.0
     #: Aim this much past the first free shift (the speed does not vanish on arrival).
     overshoot_m: float = 0.05
+    #: Monitor mode: a skid walled in (its manoeuvre search found no way round the skids
+    #: standing) ranks above every other skid until it docks, so parked neighbours in its
+    #: way make room (priority inheritance).
+    for_walled: bool = True
 
     def __post_init__(self) -> None:
         _check(self, {"lookahead_m": ">0", "clearance_m": ">=0", "gain_per_s": ">0"})
