@@ -47,8 +47,9 @@ class ManoeuvreState:
     #: How many manoeuvres were planned and how many found no way (for the run report).
     planned: int = 0
     failed: int = 0
-    #: The last search for its goal found no way round the skids standing (it stays walled
-    #: in until it docks or its goal changes: the navigator ranks it above the others).
+    #: A search for its goal found no way round the skids standing but one with the settled
+    #: skids left out: walled in by them until it docks or its goal changes (the navigator
+    #: ranks it above the others meanwhile, so they make room).
     walled: bool = False
 
     def running(self) -> bool:

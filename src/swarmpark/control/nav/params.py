@@ -450,9 +450,10 @@ class MakeRoomParams:
     shift_max_m: float = 2.0
     #: Aim this much past the first free shift (the speed does not vanish on arrival).
     overshoot_m: float = 0.05
-    #: Monitor mode: a skid walled in (its manoeuvre search found no way round the skids
-    #: standing) ranks above every other skid until it docks, so parked neighbours in its
-    #: way make room (priority inheritance).
+    #: Monitor mode: a skid walled in by parked skids (its manoeuvre search found no way
+    #: round the skids standing, but one with the settled skids left out) ranks above every
+    #: other skid until it docks, so the parked neighbours in its way make room (priority
+    #: inheritance).
     for_walled: bool = True
 
     def __post_init__(self) -> None:
