@@ -81,11 +81,11 @@ class ManoeuvrePlanner:
         raw: np.ndarray,
         states: list[ManoeuvreState],
         eligible: np.ndarray,
-        parked: np.ndarray | None = None,
+        settled: np.ndarray | None = None,
     ) -> np.ndarray:
         """Replace the commands ``raw`` (rows of ``idx``) of the skids in a manoeuvre; start
         one for an ``eligible`` skid that made no progress for ``stuck_s``. Returns which rows
-        are manoeuvring. ``parked`` ``(N,)``: the skids that could make room; a skid for which
+        are manoeuvring. ``settled`` ``(N,)``: the skids that could make room; a skid for which
         no manoeuvre is found but one is without them is marked walled in."""
         p = self.params
         out = np.zeros(len(idx), dtype=bool)
@@ -114,7 +114,7 @@ class ManoeuvrePlanner:
             if not st.running():
                 if view.t - st.best_t < p.stuck_s or view.t < st.retry_t:
                     continue
-                self._start(view, i, st, parked)
+                self._start(view, i, st, settled)
                 if not st.running():
                     continue
             cmd = self._drive(view, i, st)
@@ -189,7 +189,7 @@ class ManoeuvrePlanner:
         return occ, origin, res
 
     def _start(
-        self, view: ControlView, i: int, st: ManoeuvreState, parked: np.ndarray | None = None
+        self, view: ControlView, i: int, st: ManoeuvreState, settled: np.ndarray | None = None
     ) -> None:
         p = self.params
         win = self._window(view, i)
@@ -207,10 +207,10 @@ class ManoeuvrePlanner:
                     break
         if not segments:
             st.failed += 1
-            # Walled in by parked skids: a way exists with them left out.
-            others = parked is not None and np.any(np.delete(parked, i))
+            # Walled in by settled skids: a way exists with them left out.
+            others = settled is not None and np.any(np.delete(settled, i))
             if win is not None and others and not st.walled:
-                occ = self._window(view, i, leave_out=parked)
+                occ = self._window(view, i, leave_out=settled)
                 st.walled = bool(self._plan(view, i, *occ, p.grow_m))
             st.stop(view.t, p.retry_s)
             return

@@ -185,8 +185,8 @@ class Navigator:
         use = p.manoeuvre.enabled and p.avoidance != "rvo"
         eligible = ~docked & ~waiting & ~fleet.waiting[idx] & use
         # Walled in is judged against the settled skids, which could make room.
-        movable = self._settled(view)[0] if p.make_room.for_walled else None
-        man = self.manoeuvre.step(view, idx, raw, man_states, eligible, movable)
+        settled = self._settled(view)[0] if p.make_room.for_walled else None
+        man = self.manoeuvre.step(view, idx, raw, man_states, eligible, settled)
         for i in idx[man]:
             self.robots[i].dock.runup = False  # the docking starts afresh after it
         mraw = raw[man].copy()
@@ -337,7 +337,7 @@ class Navigator:
         return raw
 
     def _settled(self, view: ControlView) -> tuple[np.ndarray, np.ndarray]:
-        """RVO: the skids settled on their goal that can move, and the immobile ones (stopped,
+        """The skids settled on their goal that can move, and the immobile ones (stopped,
         e-stopped or idle), each ``(N,)``."""
         immobile = ~view.active
         if view.stopped is not None:
