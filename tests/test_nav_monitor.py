@@ -151,3 +151,28 @@ def test_of_two_skids_side_by_side_whose_moves_together_touch_the_lower_rank_sto
     res = _check(replace(view, priority=np.array([1.0, 2.0])), raw)
     assert np.array_equal(res.commands[0], [0.0, 0.0])
     assert np.array_equal(res.commands[1], raw[1])
+
+
+def _closing(view, raw, pairs_closing: bool):
+    scene = Scene(0.1, MonitorParams().margin_m).update(view)
+    mon = CollisionMonitor(MonitorParams(pairs_closing=pairs_closing))
+    return mon.check(view, np.arange(len(view.poses)), np.asarray(raw, float), scene)
+
+
+def test_a_skid_driving_up_to_one_turning_in_place_stops_before_its_corner():
+    """Taken from a contact on a generated hangar: g9 turns in place (1 rad/s) while g5 drives
+    up behind it. The monitor slows g5 against g9 standing, but g9's corner swings out into
+    g5's way: neither is within its margin of the other yet, so the pair was not checked
+    together and they touched."""
+    poses = [[15.94, 6.17, np.deg2rad(1.9)], [17.58, 6.34, np.deg2rad(78.5)]]
+    goals = [[17.4, 5.3, 0.0], [18.5, 5.3, 0.0]]  # the turning skid is nearer its goal
+    raw = np.array([[0.5, 0.0], [0.0, 1.0]])
+    view = make_view(poses, goals, vel=[[0.5, 0.0], [0.0, 1.0]], dt=0.05)
+    view = replace(view, footprints=(Footprint(1.2, 0.8, 0.6), Footprint(1.4, 0.9, 0.7)))
+    before = _closing(view, raw, pairs_closing=False)
+    assert 0.0 < before.commands[0, 0] < raw[0, 0] and before.commands[1, 1] == 1.0
+    assert _joint_gap(view, before.commands) == 0.0  # slowed, but they still meet
+    res = _closing(view, raw, pairs_closing=True)
+    assert np.array_equal(res.commands[0], [0.0, 0.0]) and res.blockers[0] == {1}
+    assert np.array_equal(res.commands[1], raw[1])
+    assert _joint_gap(view, res.commands) > 0.0

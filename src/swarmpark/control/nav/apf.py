@@ -27,6 +27,7 @@ __all__ = [
     "repulsion",
     "forces_to_command",
     "rect_nearest_points",
+    "turn_throttle",
 ]
 
 
@@ -104,6 +105,7 @@ def repulsion(
     x_max: np.ndarray,
     half_w: np.ndarray,
     influence_m: np.ndarray,
+    lever: bool = False,
     min_distance_m: float = 0.02,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Obstacle forces for robot-point pairs.
@@ -119,7 +121,16 @@ def repulsion(
         exerts nothing. The force is ``gain * (1/d^3 - 1/influence^3)``, pointing from the
         obstacle point to the nearest point of the body.
     x_min, x_max, half_w
-        ``(M,)`` the robot's body rectangle (rear edge, front edge, half width).
+        ``(M,)`` the robot's body rectangle (rear edge, front edge, half width); the edges
+        are also the rear and front action points.
+    lever
+        Split a point's force between the two action points as a lever does (the statically
+        equivalent pair: shares ``(x - x_min) / (x_max - x_min)`` at the front and the rest at
+        the rear, with ``x`` the body-x of the nearest body point), instead of the paper's rule
+        (all of it at the front when the point is ahead of the pivot, else at the rear). The
+        paper's rule flips the turn when a point beside the pivot crosses it, so a skid with a
+        neighbour alongside chatters in place; with the lever a push at the pivot of a skid
+        whose pivot is centred turns it not at all.
 
     Returns
     -------
@@ -141,6 +152,11 @@ def repulsion(
     n = int(robot.max()) + 1 if len(robot) else 0
     front = np.zeros((n, 2))
     rear = np.zeros((n, 2))
+    if lever:
+        share = ((near[:, 0] - x_min) / np.maximum(x_max - x_min, 1e-9))[:, None]
+        np.add.at(front, robot, f * share)
+        np.add.at(rear, robot, f * (1.0 - share))
+        return front, rear, d
     ahead = pts_body[:, 0] >= 0.0
     np.add.at(front, robot[ahead], f[ahead])
     np.add.at(rear, robot[~ahead], f[~ahead])
@@ -159,3 +175,29 @@ def forces_to_command(
     v = f_goal[:, 0] + f_front[:, 0] + f_rear[:, 0]
     w = f_goal[:, 1] / x_goal + f_front[:, 1] / x_front + f_rear[:, 1] / x_rear
     return np.column_stack([v, w])
+
+
+def turn_throttle(
+    f_goal: np.ndarray, x_goal: np.ndarray, w_net: np.ndarray, *, follow_turn: bool = True
+) -> np.ndarray:
+    """Share ``(N,)`` of the field's speed to keep while turning: ``cos^2`` of the angle
+    between the goal force and the body axis (turn before driving; the skid can spin in
+    place). With ``follow_turn`` the speed is cut only as far as the skid does turn the way
+    the goal force wants (``w_net``, the summed command, against the goal's own turn
+    ``F_y / x_a``): a skid whose turn the repulsion holds back, a neighbour at the corner that
+    would swing, drives on as the summed forces say instead of standing in a local minimum.
+
+    >>> float(turn_throttle(np.array([[0.0, 1.0]]), np.array([0.5]), np.array([2.0]))[0])
+    0.0
+    >>> float(turn_throttle(np.array([[0.0, 1.0]]), np.array([0.5]), np.array([0.0]))[0])
+    1.0
+    """
+    rel = np.arctan2(f_goal[:, 1], np.abs(f_goal[:, 0]))
+    throttle = np.clip(np.cos(rel), 0.0, 1.0) ** 2
+    if not follow_turn:
+        return throttle
+    w_goal = f_goal[:, 1] / x_goal
+    wants = np.abs(w_goal) > 1e-9
+    turning = np.ones(len(w_goal))
+    turning[wants] = np.clip(w_net[wants] / w_goal[wants], 0.0, 1.0)
+    return 1.0 - turning * (1.0 - throttle)

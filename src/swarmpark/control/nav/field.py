@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from swarmpark.control.base import ControlView
-from swarmpark.control.nav.apf import attraction, forces_to_command, repulsion
+from swarmpark.control.nav.apf import attraction, forces_to_command, repulsion, turn_throttle
 from swarmpark.control.nav.kernels import outline_pairs
 from swarmpark.control.nav.params import FieldParams
 from swarmpark.control.nav.scene import Scene
@@ -82,11 +82,11 @@ class PotentialField:
         )
         f_goal, x_goal = attraction(poses, targets, x_front, x_rear, reverse, weight)
         influence = np.where(final & (dist_goal < near_m), p.influence_at_goal_m, p.influence_m)
-        f_front, f_rear = self.repulsion(view, idx, scene, x_front, x_rear, half_w, influence)
+        f_front, f_rear = self.repulsion(
+            view, idx, scene, x_front, x_rear, half_w, influence, reverse
+        )
         raw = forces_to_command(f_goal, x_goal, f_front, f_rear, x_front, x_rear)
-        # Turn before driving when the wanted direction is far off (the skid can spin in place).
-        rel = np.arctan2(f_goal[:, 1], np.abs(f_goal[:, 0]))
-        raw[:, 0] *= np.clip(np.cos(rel), 0.0, 1.0) ** 2
+        raw[:, 0] *= turn_throttle(f_goal, x_goal, raw[:, 1], follow_turn=p.throttle_turning)
         raw[:, 0] = np.clip(raw[:, 0], -view.max_speed[idx], view.max_speed[idx])
         raw[:, 1] = np.clip(raw[:, 1], -view.max_yaw_rate[idx], view.max_yaw_rate[idx])
         return raw, dist_goal
@@ -103,8 +103,9 @@ class PotentialField:
         self._fps = fps
         return self._points
 
-    def repulsion(self, view, idx, scene: Scene, x_front, x_rear, half_w, influence):
-        """Summed body-frame repulsion on the front and rear action points of robots ``idx``."""
+    def repulsion(self, view, idx, scene: Scene, x_front, x_rear, half_w, influence, reverse=None):
+        """Summed body-frame repulsion on the front and rear action points of robots ``idx``
+        (``reverse``: which of them drive rear first, for ``ignore_followers``)."""
         p = self.params
         n_act = len(idx)
         static = scene.static
@@ -122,6 +123,12 @@ class PotentialField:
         d = world - pose[:, :2]
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         body = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+        if p.ignore_followers and reverse is not None:
+            # Outline points of other skids behind the pivot (as the skid drives) do not push:
+            # a skid that follows keeps its own distance, and a push on the trailing end
+            # would only turn the leader off its path (the monitor still guards its swing).
+            lead = np.where(reverse[rob], -1.0, 1.0)
+            gain = np.where((owner >= 0) & (body[:, 0] * lead < 0.0), 0.0, gain)
         person = owner == _PERSON
         if person.any():
             # A person's rim is closer than the centre by the radius: move the point inwards.
@@ -129,7 +136,7 @@ class PotentialField:
             nrm = np.linalg.norm(body[person], axis=1, keepdims=True)
             body[person] *= np.maximum(1 - rad[:, None] / np.maximum(nrm, 1e-9), 0.0)
         front, rear, _ = repulsion(
-            rob, body, gain, x_rear[rob], x_front[rob], half_w[rob], influence[rob]
+            rob, body, gain, x_rear[rob], x_front[rob], half_w[rob], influence[rob], p.lever_split
         )
         out_f, out_r = np.zeros((n_act, 2)), np.zeros((n_act, 2))
         out_f[: len(front)] = front

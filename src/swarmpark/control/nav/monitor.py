@@ -311,6 +311,11 @@ class CollisionMonitor:
         together, bring them into contact within the horizon, the one of lower rank stops
         (in place on ``out``; the other is added to its ``blockers``).
 
+        With ``pairs_closing`` (the default) every pair within reach of each other counts,
+        not only those already within their margins: a skid turning in place sweeps its
+        corners out while the skid driving up behind it takes it as standing (each safe
+        against the other standing, they touched on generated hangar and open-deck sites).
+
         Each skid's own check takes the others as standing still, and a skid inside its
         margin is judged by its plain footprint (or it could never move away). Side by side
         that is not enough: two skids 2 cm apart, one driving along the other's side while
@@ -325,16 +330,17 @@ class CollisionMonitor:
         if len(moving) < 2:
             return
         rows = idx[moving]
-        grown = np.ascontiguousarray(scene.skids.grown[rows], dtype=float)
         reach = 2.0 * self._max_circumradius(view.footprints) + 2.0 * self.params.margin_m
         pairs = cKDTree(view.poses[rows, :2]).query_pairs(reach, output_type="ndarray")
         if not len(pairs):
             return
         pairs = pairs.astype(np.int64)
-        now = np.ascontiguousarray(footprint_corners(view.poses[rows], grown)[:, None])
-        pairs = pairs[pairs_touching(pairs, now, TOUCH_TOLERANCE_M)]
-        if not len(pairs):
-            return
+        if not self.params.pairs_closing:
+            grown = np.ascontiguousarray(scene.skids.grown[rows], dtype=float)
+            now = np.ascontiguousarray(footprint_corners(view.poses[rows], grown)[:, None])
+            pairs = pairs[pairs_touching(pairs, now, TOUCH_TOLERANCE_M)]
+            if not len(pairs):
+                return
         # Only the skids of those pairs are rolled out (most skids on the move have none).
         members, inverse = np.unique(pairs.ravel(), return_inverse=True)
         pairs = inverse.reshape(-1, 2).astype(np.int64)

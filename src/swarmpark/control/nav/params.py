@@ -273,6 +273,13 @@ class FieldParams:
     influence_at_goal_m: float = 0.15
     #: Sampling of obstacle and skid outlines for the field (a tenth of the smallest gap).
     outline_step_m: float = 0.1
+    #: Split each obstacle point's push between the front and rear action points as a lever
+    #: (:func:`.apf.repulsion`); False: the paper's rule, all of it at the nearer end.
+    lever_split: bool = True
+    #: Slow down for a turn only as far as the skid does turn (the repulsion may hold it).
+    throttle_turning: bool = False
+    #: Other skids' outline points behind the pivot (as the skid drives) do not push it.
+    ignore_followers: bool = True
 
     def __post_init__(self) -> None:
         _check(self, {"slow_radius_m": ">0", "min_goal_speed_mps": ">0", "heading_lever_m": ">=0"})
@@ -345,6 +352,10 @@ class MonitorParams:
     #: Skids whose pivots are farther apart than this cannot overlap now (twice the reach of
     #: a skid whose far corner is 1.5 m from its pivot; the default skid's is 0.72 m).
     neighbour_range_m: float = 3.0
+    #: Check pairs of moving skids within reach of each other for contact under both their
+    #: commands (:meth:`.monitor.CollisionMonitor.close_pairs`), not only pairs already
+    #: within their margins.
+    pairs_closing: bool = True
 
     def __post_init__(self) -> None:
         _check(self, {"horizon_s": ">0", "samples": "int>0", "margin_m": ">=0"})
