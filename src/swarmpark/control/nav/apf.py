@@ -5,8 +5,9 @@ Each skid has two action points on its body x axis: the front one at the front e
 rear one at the rear edge. The goal attracts one of them (whichever end has the shorter arc
 to the goal, extension 1 of the 2015 paper) along the tangent of the circle that passes
 through it and meets the goal's action point at the goal heading. Obstacle points push the
-front action point when they lie ahead of the pivot and the rear one when behind, with a
-force falling as 1/d^3 from the footprint. A force F at an action point at body-x ``x_a``
+front action point when they lie ahead of the pivot and the rear one when behind (the
+navigator splits each push between the two as a lever instead: ``repulsion(lever=True)``),
+with a force falling as 1/d^3 from the footprint. A force F at an action point at body-x ``x_a``
 contributes ``v = F_x`` and ``omega = F_y / x_a`` (eq. 12); a force on the rear point thus
 turns the skid the other way, which is the paper's "rear forces inverted and added at the
 front".
