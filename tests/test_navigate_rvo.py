@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 from helpers import Scripted, make_world
 
-from swarmpark.control.nav.monitor import rollout
+from swarmpark.control.nav.monitor import CollisionMonitor, rollout
 from swarmpark.control.nav.navigator import Navigator, NavParams
+from swarmpark.control.nav.params import MonitorParams
 from swarmpark.supervisor.core import Supervisor
 
 
@@ -52,8 +53,14 @@ def test_joint_check_stops_two_skids_that_would_swing_their_corners_together():
     view = sup.view()
     raw = np.array([[0.0, 0.3], [0.0, -0.3]])
     idx = np.array([0, 1])
-    alone = _check(view, idx, raw)
+    nav = _navigator(view)
+    standing = CollisionMonitor(MonitorParams(pairs_closing=False))  # each against the other still
+    alone = standing.check(view, idx, raw, nav.scene).commands
     assert np.array_equal(alone, raw)
+    # The monitor mode's pair check stops only the skid of lower rank; the joint check of the
+    # RVO mode stops both.
+    paired = _check(view, idx, raw)
+    assert np.array_equal(paired, [raw[0], [0.0, 0.0]])
     together = _check(view, idx, raw, joint=True)
     assert np.array_equal(together, np.zeros((2, 2)))
     # Turning the same way, the corners move apart in step: both keep their commands.
