@@ -2,8 +2,12 @@
 
 import numpy as np
 import pytest
+from navkit import make_view
 
 from swarmpark.control.nav.apf import forces_to_command, repulsion, turn_throttle
+from swarmpark.control.nav.field import PotentialField
+from swarmpark.control.nav.params import FieldParams
+from swarmpark.control.nav.scene import Scene
 
 # A 1.2 m x 0.8 m skid with its pivot in the middle: action points at body x = -0.6 and 0.6.
 X_REAR, X_FRONT, HALF_W = -0.6, 0.6, 0.4
@@ -81,15 +85,9 @@ def test_throttle_cuts_speed_only_as_far_as_the_skid_turns():
     np.testing.assert_allclose(ahead, [1.0])
 
 
-def _rear_push(ignore: bool, reverse: bool) -> np.ndarray:
+def _rear_push(ignore: bool, reverse: bool) -> tuple[np.ndarray, np.ndarray]:
     """Front and rear forces on skid 0 from skid 1 right behind it (0.3 m gap, off to the
     left by 0.3 m), skid 0 driving forwards or in reverse."""
-    from navkit import make_view
-
-    from swarmpark.control.nav.field import PotentialField
-    from swarmpark.control.nav.params import FieldParams
-    from swarmpark.control.nav.scene import Scene
-
     view = make_view([[5.0, 3.0, 0.0], [3.5, 3.3, 0.0]])
     field = PotentialField(FieldParams(ignore_followers=ignore))
     scene = Scene(0.1, 0.03).update(view)
@@ -109,7 +107,7 @@ def _rear_push(ignore: bool, reverse: bool) -> np.ndarray:
 
 def test_a_skid_following_behind_does_not_push_the_leader():
     front, rear = _rear_push(ignore=False, reverse=False)
-    assert rear[0, 1] < 0 and rear[0, 0] > 0  # the paper's field: pushed on and turned
+    assert rear[0, 1] < 0 and rear[0, 0] > 0  # without the rule: pushed on and turned
     front, rear = _rear_push(ignore=True, reverse=False)
     assert np.all(front == 0) and np.all(rear == 0)
     # Driving in reverse, the skid behind is ahead in the direction of travel: it pushes.

@@ -103,7 +103,7 @@ class PotentialField:
         self._fps = fps
         return self._points
 
-    def repulsion(self, view, idx, scene: Scene, x_front, x_rear, half_w, influence, reverse=None):
+    def repulsion(self, view, idx, scene: Scene, x_front, x_rear, half_w, influence, reverse):
         """Summed body-frame repulsion on the front and rear action points of robots ``idx``
         (``reverse``: which of them drive rear first, for ``ignore_followers``)."""
         p = self.params
@@ -123,7 +123,7 @@ class PotentialField:
         d = world - pose[:, :2]
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         body = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
-        if p.ignore_followers and reverse is not None:
+        if p.ignore_followers:
             # Outline points of other skids behind the pivot (as the skid drives) do not push:
             # a skid that follows keeps its own distance, and a push on the trailing end
             # would only turn the leader off its path (the monitor still guards its swing).
