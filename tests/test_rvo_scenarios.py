@@ -11,7 +11,7 @@ import yaml
 
 from swarmpark.apps.run import run_world
 from swarmpark.control.orca.kernel import orca_step
-from swarmpark.core.geometry import Footprint, footprint_corners, rect_disc_gap
+from swarmpark.core.geometry import Footprint
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import build_world, parse_scenario
 
@@ -59,27 +59,6 @@ def test_fig11_lower_priority_takes_the_larger_detour():
     high = r["robots"]["bottom"]["max_lateral_deviation_m"]
     assert low > 1.5 * high > 0.0
     assert r["min_clearance_robot_m"] > 0.1
-
-
-@pytest.mark.slow
-def test_person_walks_through_the_formation_without_contact_and_it_restores():
-    world = rvo_world("person-through-formation.yaml")
-    sup = Supervisor(world)
-    corners = [fp.corners_body() for fp in sup.sim.footprints]
-    start = sup.sim.poses.copy()
-    gap, moved = np.inf, np.zeros(sup.sim.n)
-    while not sup.settled() and sup.t < world.scenario.duration_s:
-        sup.tick()
-        c = footprint_corners(sup.sim.poses, np.stack(corners))
-        for pos, rad in zip(sup.sim.person_positions(), sup.sim.person_radius, strict=True):
-            gap = min(gap, float(rect_disc_gap(c, pos[None], np.full(len(c), rad)).min()))
-        moved = np.maximum(moved, np.linalg.norm(sup.sim.poses[:, :2] - start[:, :2], axis=1))
-    assert sup.settled() and sup.sim.people_done()
-    assert sup.metrics.collisions == []
-    assert gap > 0.05  # the person never came within 5 cm of a skid
-    assert moved.max() > 0.15  # skids in the walk made room ...
-    err = np.linalg.norm(sup.sim.poses[:, :2] - start[:, :2], axis=1)
-    assert err.max() <= 0.05  # ... and are back on their spots
 
 
 def test_estop_overrides_rvo_and_making_room():

@@ -3,10 +3,13 @@ gives people the right of way, so the person does not walk into a skid either.""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
 from swarmpark.apps.run import run_world
+from swarmpark.core.geometry import footprint_corners, rect_disc_gap
+from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import build_world, load_scenario, parse_scenario
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "person-stands-then-walks.yaml"
@@ -28,9 +31,11 @@ PERTURB = {"start_m": 0.2, "start_deg": 10, "shuffle": True}
 ROOT = SCENARIO.parent
 
 
-def _perturbed(name: str, seed: int, **people):
+def _perturbed(name: str, seed: int, *, rvo: bool = False, **people):
     data = yaml.safe_load((ROOT / name).read_text())
     data.update(seed=seed, perturb=PERTURB)
+    if rvo:
+        data["navigation"] = {"avoidance": "rvo"}
     for o in data.get("obstacles", []):
         if "waypoints" in o:
             o.update(people)
@@ -59,8 +64,36 @@ def test_a_walker_through_the_formation_from_perturbed_starts_parks_without_cont
 
 @pytest.mark.slow
 def test_a_walker_who_does_not_react_is_reported_as_walking_into_the_formation():
-    # Seed 2: a2, still docking, stands in the walk; a walker who does not react walks into
-    # it. That contact is the person's (person-robot), not the fleet's.
-    r = run_world(_perturbed("person-through-formation.yaml", 2, reacts=False)).result
+    # Seed 2 with velocity obstacles: a2, still docking, stands in the walk; a walker who does
+    # not react walks into it. That contact is the person's (person-robot), not the fleet's.
+    r = run_world(_perturbed("person-through-formation.yaml", 2, reacts=False, rvo=True)).result
     kinds = {c["kind"] for c in r["collisions"]}
     assert kinds == {"person-robot"}, r["collisions"]
+    # The default stack (the file as it is) has a2 out of the walk in time: no contact.
+    r = run_world(_perturbed("person-through-formation.yaml", 2, reacts=False)).result
+    assert r["collisions"] == [], r["collisions"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rvo", [False, True], ids=["default", "rvo"])
+def test_person_walks_through_the_formation_without_contact_and_it_restores(rvo):
+    data = yaml.safe_load((ROOT / "person-through-formation.yaml").read_text())
+    if rvo:
+        data["navigation"] = {"avoidance": "rvo"}
+    world = build_world(parse_scenario(data, ROOT))
+    sup = Supervisor(world)
+    corners = [fp.corners_body() for fp in sup.sim.footprints]
+    start = sup.sim.poses.copy()
+    gap, moved = np.inf, np.zeros(sup.sim.n)
+    while not (sup.settled() and sup.sim.people_done()) and sup.t < world.scenario.duration_s:
+        sup.tick()
+        c = footprint_corners(sup.sim.poses, np.stack(corners))
+        for pos, rad in zip(sup.sim.person_positions(), sup.sim.person_radius, strict=True):
+            gap = min(gap, float(rect_disc_gap(c, pos[None], np.full(len(c), rad)).min()))
+        moved = np.maximum(moved, np.linalg.norm(sup.sim.poses[:, :2] - start[:, :2], axis=1))
+    assert sup.settled() and sup.sim.people_done()
+    assert sup.metrics.collisions == []
+    assert gap > 0.05  # the person never came within 5 cm of a skid
+    assert moved.max() > 0.15  # skids in the walk made room ...
+    err = np.linalg.norm(sup.sim.poses[:, :2] - start[:, :2], axis=1)
+    assert err.max() <= 0.05  # ... and are back on their spots

@@ -1,9 +1,10 @@
 """Making room: a parked skid standing in another's way moves aside along its own axis.
 
 With RVO every parked skid makes room for every skid on the move and every walking person. In
-the monitor mode (the default) a parked skid makes room only for skids of higher priority
-(2015 paper Fig. 6: a skid with priority passes through a parked formation); skids of equal
-priority keep their spots, and people are given way by :mod:`.people`. A skid walled in by
+the monitor mode (the default) a parked skid makes room for skids of higher priority (2015
+paper Fig. 6: a skid with priority passes through a parked formation) and for walking people,
+who outrank every skid (issue 15: people have the right of way; skids on the move give way to
+them by :mod:`.people`); skids of equal priority keep their spots. A skid walled in by
 parked skids (no manoeuvre to its spot round them, one without them) ranks above all others
 until it docks (the navigator's priority inheritance), so its parked neighbours make room.
 
@@ -36,6 +37,9 @@ __all__ = ["MakeRoom", "RoomResult", "RoomState", "cut_off"]
 
 #: People slower than this stand still: they have no walk ahead to keep clear.
 _WALKING_MPS = 1e-6
+#: A walk crosses a skid's axis when it meets it at more than this angle (see
+#: ``MakeRoom._aside``).
+_CROSSING_RAD = np.radians(45.0)
 
 
 @dataclass
@@ -78,30 +82,28 @@ class MakeRoom:
         scene: Scene,
         *,
         above: float | None = None,
+        people: bool = True,
     ):
-        """The ways the movers (skids not settled, walking people) will take (shapely); with
-        ``above``, only those of skids with a priority above it (and no people)."""
+        """The ways the movers (skids not settled, walking people unless ``people`` is false)
+        will take, as ``(shapely geometry, walk direction)``: the direction ``(2,)`` of a
+        person's walk, ``None`` for a skid's way. With ``above``, only the ways of skids with a
+        priority above it (and of all walking people)."""
         p = self.params
-        out = []
+        out: list[tuple[shapely.Geometry, np.ndarray | None]] = []
         movers = view.active & ~settled
         if above is not None:
             movers &= view.priority > above
         for j in np.flatnonzero(movers):
             line = path_ahead(view, j, paths[j], p.lookahead_m)
             half = view.footprints[j].width_m / 2 + p.clearance_m
-            out.append(shapely.LineString(line).buffer(half, cap_style="flat"))
+            out.append((shapely.LineString(line).buffer(half, cap_style="flat"), None))
             # The skid itself as it stands (it may be turning on the spot).
-            out.append(shapely.Polygon(scene.corners_now(view, j)).buffer(p.clearance_m))
-        if above is not None:
-            return out
-        walking = (
-            np.linalg.norm(view.people_vel, axis=1) > _WALKING_MPS if len(view.people_xy) else []
-        )
-        for k in np.flatnonzero(walking):
-            v = view.people_vel[k]
-            ahead = view.people_xy[k] + v / np.linalg.norm(v) * p.lookahead_m
+            out.append((shapely.Polygon(scene.corners_now(view, j)).buffer(p.clearance_m), None))
+        for k in np.flatnonzero(_walking(view)) if people else ():
+            u = view.people_vel[k] / np.linalg.norm(view.people_vel[k])
+            ahead = view.people_xy[k] + u * p.lookahead_m
             half = view.people_radius[k] + p.clearance_m
-            out.append(shapely.LineString([view.people_xy[k], ahead]).buffer(half))
+            out.append((shapely.LineString([view.people_xy[k], ahead]).buffer(half), u))
         return out
 
     def step(
@@ -113,9 +115,11 @@ class MakeRoom:
         scene: Scene,
         *,
         by_priority: bool = False,
+        people: bool = True,
     ) -> RoomResult:
         """Speeds along the axis of the settled skids (``settled``) that stand in a way; with
-        ``by_priority``, only in the ways of skids of higher priority than their own."""
+        ``by_priority``, only in the ways of skids of higher priority than their own and of
+        walking people (``people``: people's ways count at all)."""
         n = len(view.poses)
         res = RoomResult(np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
         free = settled & ~view.stopped if view.stopped is not None else settled
@@ -123,20 +127,48 @@ class MakeRoom:
         if not len(cand):
             return res  # no settled skid to move aside: the corridors are not needed
         if not by_priority:
-            self._aside(view, cand, self.corridors(view, settled, paths, scene), rooms, scene, res)
+            ways = self.corridors(view, settled, paths, scene, people=people)
+            self._aside(view, cand, ways, rooms, scene, res)
             return res
-        if not np.any(view.active & ~settled & (view.priority > view.priority[cand].min())):
+        outranked = np.any(view.active & ~settled & (view.priority > view.priority[cand].min()))
+        if not outranked and not (people and np.any(_walking(view))):
             for i in cand:
                 rooms[i].side = 0
             return res  # nobody outranks a parked skid: nobody makes room (the usual park)
         for level in np.unique(view.priority[cand]):
             rows = cand[view.priority[cand] == level]
-            ways = self.corridors(view, settled, paths, scene, above=float(level))
+            ways = self.corridors(view, settled, paths, scene, above=float(level), people=people)
             self._aside(view, rows, ways, rooms, scene, res)
         return res
 
     def _aside(self, view, cand, corridors, rooms, scene, res: RoomResult) -> None:
-        """Fills ``res`` for the settled skids ``cand`` against the ways ``corridors``."""
+        """Fills ``res`` for the settled skids ``cand`` against the ways ``corridors`` (from
+        :meth:`corridors`). A person's walk counts for a skid only if it crosses the skid's
+        axis at more than :data:`_CROSSING_RAD`: stepping along its axis takes a skid out of
+        such a walk, while from a walk along its axis it would only drive ahead of the person
+        (an aisle between parked columns is passed side by side, the field and
+        :mod:`.people` keeping the skids' distance)."""
+        if not corridors:
+            for i in cand:
+                rooms[i].side = 0
+            return
+        walks = [(g, u) for g, u in corridors if u is not None]
+        if not walks:
+            self._aside_of(view, cand, [g for g, _ in corridors], rooms, scene, res)
+            return
+        heading = view.poses[cand, 2]
+        axis = np.column_stack([np.cos(heading), np.sin(heading)])
+        crosses = np.abs(axis @ np.stack([u for _, u in walks]).T) < np.cos(_CROSSING_RAD)
+        ways = [g for g, u in corridors if u is None]
+        groups: dict[bytes, list[int]] = {}
+        for row, flags in enumerate(crosses):
+            groups.setdefault(flags.tobytes(), []).append(row)
+        for rows in groups.values():
+            mine = ways + [g for (g, _), c in zip(walks, crosses[rows[0]], strict=True) if c]
+            self._aside_of(view, cand[rows], mine, rooms, scene, res)
+
+    def _aside_of(self, view, cand, corridors, rooms, scene, res: RoomResult) -> None:
+        """:meth:`_aside` for skids ``cand`` against one list of ways (shapely)."""
         if not corridors:
             for i in cand:
                 rooms[i].side = 0
@@ -192,6 +224,13 @@ class MakeRoom:
                 if s == side:
                     break
         return best
+
+
+def _walking(view: ControlView) -> np.ndarray:
+    """``(P,)`` bool: the people that walk (faster than :data:`_WALKING_MPS`)."""
+    if not len(view.people_xy):
+        return np.zeros(0, dtype=bool)
+    return np.linalg.norm(view.people_vel, axis=1) > _WALKING_MPS
 
 
 def cut_off(

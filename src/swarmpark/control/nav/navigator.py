@@ -325,6 +325,7 @@ class Navigator:
             self._states("room"),
             self.scene,
             by_priority=True,
+            people=self.params.people.enabled,
         )
         self.making_room = room.aside
         for i in np.flatnonzero(room.undock):

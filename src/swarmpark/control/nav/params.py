@@ -444,7 +444,7 @@ class DeadlockParams:
 @dataclass(frozen=True, kw_only=True)
 class MakeRoomParams:
     """Making room (:mod:`.make_room`): with RVO for every mover, in monitor mode for a skid of
-    higher priority or a walled-in one."""
+    higher priority, a walled-in one or a walking person."""
 
     #: A parked skid in the corridor another skid will sweep (its path from its rear to this
     #: far ahead) or a walking person will cross (this far along their velocity) moves aside.
@@ -548,9 +548,11 @@ class HoldParams:
 
 @dataclass(frozen=True, kw_only=True)
 class PeopleParams:
-    """Right of way for people (:mod:`.people`): skids keep out of a person's predicted walk."""
+    """Right of way for people (:mod:`.people`): skids keep out of a person's predicted walk,
+    and in monitor mode parked skids in a walking person's way make room (:mod:`.make_room`)."""
 
-    #: Off: people are left to the field and the monitor alone (the behaviour before).
+    #: Off: people are left to the field and the monitor alone (the behaviour before), and
+    #: parked skids make room for them only with RVO.
     enabled: bool = True
     #: A person's walk is predicted this far ahead at constant velocity (a skid needs about
     #: 2 s to back its own length out of the way; 3 s leaves room for the tracker's lag).
