@@ -25,11 +25,12 @@ def _gap(pose, xy):
     return float(rect_disc_gap(corners, np.asarray(xy)[None], np.array([RADIUS]))[0])
 
 
-def _walk_at_parked_skid(params: NavParams, seconds: float = 6.0):
-    """A person walks south at 1.2 m/s straight at a skid parked (its goal is where it
-    stands) across the walk; returns the smallest gap and the skid's last pose."""
+def _walk_at_parked_skid(params: NavParams, seconds: float = 6.0, pose=(5.0, 3.0, 0.0)):
+    """A person walks south at 1.2 m/s along x = 5 m past a skid parked at ``pose`` (its goal
+    is where it stands; by default straight across the walk); returns the smallest gap and
+    the skid's last pose."""
     nav = Navigator(params)
-    pose = np.array([[5.0, 3.0, 0.0]])
+    pose = np.array([pose], dtype=float)
     goal = pose.copy()
     person, vel = np.array([5.0, 5.8]), np.array([0.0, -1.2])
     v = np.zeros((1, 2))
@@ -62,6 +63,15 @@ def test_a_parked_skid_steps_out_of_the_way_of_a_person_walking_at_it():
     off, still = _walk_at_parked_skid(NavParams(people=PeopleParams(enabled=False)))
     assert off < 0.0
     assert np.allclose(still[:2], [5.0, 3.0], atol=0.02)
+
+
+def test_a_parked_skid_beside_a_walk_along_its_axis_stays():
+    # Parked heading north 0.85 m beside the walk (0.2 m between its side and the person, inside
+    # the make-room corridor): stepping along its axis would only drive it ahead of the
+    # person, so it keeps its spot and the person passes beside it.
+    gap, pose = _walk_at_parked_skid(NavParams(), pose=(5.85, 3.0, np.pi / 2))
+    assert gap > 0.1
+    assert np.allclose(pose[:2], [5.85, 3.0], atol=0.005)  # (it drove 5 cm without the rule)
 
 
 def test_a_skid_steps_aside_on_the_side_it_reaches_first():

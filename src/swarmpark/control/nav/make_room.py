@@ -148,10 +148,6 @@ class MakeRoom:
         such a walk, while from a walk along its axis it would only drive ahead of the person
         (an aisle between parked columns is passed side by side, the field and
         :mod:`.people` keeping the skids' distance)."""
-        if not corridors:
-            for i in cand:
-                rooms[i].side = 0
-            return
         walks = [(g, u) for g, u in corridors if u is not None]
         if not walks:
             self._aside_of(view, cand, [g for g, _ in corridors], rooms, scene, res)
