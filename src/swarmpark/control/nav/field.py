@@ -128,7 +128,8 @@ class PotentialField:
             # a skid that follows keeps its own distance, and a push on the trailing end
             # would only turn the leader off its path (the monitor still guards its swing).
             lead = np.where(reverse[rob], -1.0, 1.0)
-            gain = np.where((owner >= 0) & (body[:, 0] * lead < 0.0), 0.0, gain)
+            keep = (owner < 0) | (body[:, 0] * lead >= 0.0)
+            rob, pt, owner, gain, body = rob[keep], pt[keep], owner[keep], gain[keep], body[keep]
         person = owner == _PERSON
         if person.any():
             # A person's rim is closer than the centre by the radius: move the point inwards.
