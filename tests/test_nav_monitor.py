@@ -176,3 +176,26 @@ def test_a_skid_driving_up_to_one_turning_in_place_stops_before_its_corner():
     assert np.array_equal(res.commands[0], [0.0, 0.0]) and res.blockers[0] == {1}
     assert np.array_equal(res.commands[1], raw[1])
     assert _joint_gap(view, res.commands) > 0.0
+
+
+def test_two_skids_turning_towards_each_other_keep_the_margin():
+    """Taken from a contact on a generated open deck with onboard localization: a 1.0 m skid
+    and a 1.2 m skid turn towards each other, each safe against the other standing. Judged by
+    their plain footprints the pair closed to 1 cm between their estimates, and 1.2 cm of
+    relative localization error made that a contact; now they keep the monitor's margin."""
+    poses = [[13.525, 5.696, np.deg2rad(56.7)], [14.599, 6.497, np.deg2rad(97.8)]]
+    goals = [[13.634, 6.094, np.pi / 2], [14.737, 6.229, np.pi / 2]]
+    raw = np.array([[0.23, 0.40], [0.18, -0.85]])
+    view = make_view(poses, goals, vel=[[0.04, 0.10], [0.09, -0.85]], dt=0.05)
+    view = replace(view, footprints=(Footprint(1.0, 0.7, 0.5), Footprint(1.2, 0.8, 0.6)))
+    plain = np.stack([fp.corners_body() for fp in view.footprints])
+    assert _joint_gap(view, raw, steps=30) == 0.0  # the commands as asked touch
+    gap, moved = np.inf, 0.0
+    for _ in range(40):
+        cmd = _check(view, raw).commands
+        moved += np.abs(cmd[:, 0]).sum() * view.dt
+        view = advance(view, cmd)
+        a, b = footprint_corners(view.poses, plain)
+        gap = min(gap, Polygon(a).distance(Polygon(b)))
+    assert gap >= 0.9 * MonitorParams().margin_m
+    assert moved > 0.1  # not both frozen

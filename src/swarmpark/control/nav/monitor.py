@@ -325,6 +325,12 @@ class CollisionMonitor:
         stopped one standing, so the pair parts. Stopping both (the joint check of the RVO
         mode, for every pair) stalled pairs for good in this mode. If the stopped skid's
         braking still meets the other's move, the other stops too.
+
+        Two skids farther apart than the monitor's ``margin_m`` must stay that far apart (each
+        footprint grown by half of it); only pairs already closer, and the check that stops
+        both, are judged by their plain footprints. Judged by plain footprints always, two
+        skids turning towards each other on a generated open deck closed to 1 cm between
+        their estimates, and 1.2 cm of relative localization error made that a contact.
         """
         moving = np.flatnonzero(np.any(out != 0.0, axis=1))
         if len(moving) < 2:
@@ -346,12 +352,26 @@ class CollisionMonitor:
         pairs = inverse.reshape(-1, 2).astype(np.int64)
         moving, rows = moving[members], rows[members]
         plain = np.ascontiguousarray(scene.skids.plain[rows], dtype=float)
+        # Each footprint grown by half the margin: two of them touch when the plain ones come
+        # within the margin of each other.
+        half = np.ascontiguousarray(0.5 * (plain + scene.skids.grown[rows]), dtype=float)
+        # Pairs farther apart now than the margin keep it; pairs already within it must not
+        # touch (or they could never part).
+        now = np.ascontiguousarray(footprint_corners(view.poses[rows], half)[:, None])
+        apart = ~pairs_touching(pairs, now, TOUCH_TOLERANCE_M)
 
-        def touching(cmd: np.ndarray) -> np.ndarray:
-            swept = _swept(view, rows, cmd, plain, self.times)
-            return pairs_touching(pairs, swept, TOUCH_TOLERANCE_M)
+        def touching(cmd: np.ndarray, keep: np.ndarray) -> np.ndarray:
+            """Pairs whose swept footprints touch (grown by half the margin where ``keep``)."""
+            pose = rollout(view, rows, cmd[:, 0], cmd[:, 1], self.times).reshape(-1, 3)
+            out = np.zeros(len(pairs), dtype=bool)
+            for sel, body in ((keep, half), (~keep, plain)):
+                if sel.any():
+                    swept = rollout_corners(pose, body, len(self.times))
+                    swept = swept.reshape(len(rows), len(self.times), 4, 2)
+                    out[sel] = pairs_touching(pairs[sel], swept, TOUCH_TOLERANCE_M)
+            return out
 
-        hit = touching(out[moving])
+        hit = touching(out[moving], apart)
         if not hit.any():
             return
         to_goal = np.linalg.norm(view.poses[rows, :2] - view.goals[rows, :2], axis=1)
@@ -362,7 +382,7 @@ class CollisionMonitor:
             lo, hi = (a, b) if rank[a] > rank[b] else (b, a)
             out[moving[lo]] = 0.0
             blockers[moving[lo]].add(int(rows[hi]))
-        again = touching(out[moving])
+        again = touching(out[moving], np.zeros(len(pairs), dtype=bool))
         for a, b in pairs[again]:
             out[moving[a]] = out[moving[b]] = 0.0
 
