@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
+from swarmpark.apps.generate import generate
+from swarmpark.apps.run import run_world
 from swarmpark.core.geometry import Footprint, footprint_corners, wrap_angle
 from swarmpark.core.gridmap import grid_from_walls
 from swarmpark.sense.amcl import FleetLocalizer, LikelihoodField
@@ -17,6 +19,7 @@ from swarmpark.sense.amcl.coop import (
     rectangle_distance,
 )
 from swarmpark.sense.lidar import LidarSpec, beam_angles, prepare_grid, scan
+from swarmpark.world.scenario import build_world, parse_scenario
 
 FP = Footprint(length_m=1.2, width_m=0.8, pivot_from_rear_m=0.6)
 SPEC = LidarSpec(num_beams=360, max_range_m=5.0, range_noise_std_m=0.01)
@@ -126,11 +129,13 @@ def _drive_pair(coop: CoopConfig | None, seed: int = 0) -> tuple[float, float]:
 
 def test_a_skid_that_sees_only_a_neighbour_stays_localized_with_cooperation():
     worst_alone, _ = _drive_pair(None)
-    worst_coop, _ = _drive_pair(CoopConfig())
     assert worst_alone > 0.1  # odometry alone: 12 cm off after 4 m (mostly the turn's)
     # The neighbour's rear face fixes the distance and the bearing, not the offset along the
-    # face: what remains is the sideways drift before the filter's heading settled (4 cm).
-    assert worst_coop < 0.05
+    # face: what remains is the sideways drift before the filter's heading settled. Over
+    # four seeds: 3.7-5.9 cm, mean 4.5 cm (with 200 particles instead of the default 1000:
+    # 3.9-8.4 cm, mean 5.4 cm).
+    worst_coop = np.array([_drive_pair(CoopConfig(), seed)[0] for seed in range(4)])
+    assert worst_coop.mean() < 0.05 and worst_coop.max() < 0.07
 
 
 def test_pose_variance_adds_the_turn_of_the_ends():
@@ -146,3 +151,16 @@ def test_the_scenario_option_turns_cooperation_off():
     assert not SensingSpec(localization="amcl", cooperative=False).cooperative
     with pytest.raises(ValueError, match="cooperative"):
         SensingSpec(localization="amcl", cooperative="sometimes")
+
+
+@pytest.mark.slow
+def test_a_generated_open_deck_parks_with_onboard_localization():
+    """Open-deck training site 2018 (6 skids, AMCL with cooperation): the block parks 3.4-4.8 m
+    from the east wall and more than 5 m from the others, so nothing in range shows y. With
+    200 particles per skid it ended 8 cm off as a block and 2 of 6 parked (docs/sensing.md)."""
+    data = generate("open-deck", 2018, robots=6)
+    assert data["sensing"]["localization"] == "amcl"
+    r = run_world(build_world(parse_scenario(data))).result
+    assert r["success"] and r["collisions"] == []
+    assert r["localization"]["mean_error_m"] <= 0.05
+    assert all(s["final_position_error_m"] <= 0.10 for s in r["robots"].values())
