@@ -48,3 +48,44 @@ def test_one_run_serves_many_goals():
     for p, goal in zip(paths, goals, strict=True):
         assert p[-1] == pytest.approx(goal)
         assert LineString(p).distance(WALL) >= 0.4 - 0.05
+
+
+def _blind_metres(path, cm) -> float:
+    """Metres of ``path`` through the coastal costmap's blind cells (sampled every 1 cm)."""
+    out = 0.0
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        n = max(int(np.linalg.norm(b - a) / 0.01), 2)
+        pts = a + np.linspace(0, 1, n)[:, None] * (b - a)
+        rc = cm.grid.world_to_cell(pts)
+        out += cm.blind[rc[:, 0], rc[:, 1]].mean() * np.linalg.norm(b - a)
+    return out
+
+
+def test_coastal_path_keeps_within_sight_of_the_wall():
+    """An open deck with one wall along its north side: the coastal costmap (Roy et al. 1999)
+    makes the path across it climb to within sight of the wall, and shortcutting must not cut
+    the corners it took; with no weight, the straight line."""
+    deck = grid_from_walls((20, 12), 0.1, [box(0, 11.8, 20, 12)])
+    start, goal = (1.0, 4.0), (19.0, 4.0)
+    plain = plan_path(build_costmap(deck, 0.4, 0.7), start, goal)
+    assert len(plain) == 2  # straight across
+    cm = build_costmap(deck, 0.4, 0.7, seen_within_m=4.0, blind_weight=1.0)
+    (mid,), (near,) = (cm.grid.world_to_cell(np.array([xy])) for xy in ([10, 4], [10, 8.5]))
+    assert cm.blind[tuple(mid)] and not cm.blind[tuple(near)]
+    path = plan_path(cm, start, goal)
+    # Out of sight only on the slants up to the seen band (3.8 m of rise) and back down:
+    # about 11 m, against 18 m straight across.
+    assert _blind_metres(path, cm) < 12.0
+    assert path[:, 1].max() >= 7.7
+    # The longer way is worth it only while it costs less than the blind metres it saves.
+    low = plan_path(build_costmap(deck, 0.4, 0.7, seen_within_m=4.0, blind_weight=0.05), start, goal)
+    assert len(low) == 2
+
+
+def test_coastal_costmap_needs_something_to_see():
+    """With no wall on the map every cell is blind (the map's edge is not seen), and the path
+    is the straight line, just costlier."""
+    empty = grid_from_walls((10, 6), 0.1, [])
+    cm = build_costmap(empty, 0.4, 0.7, seen_within_m=4.0, blind_weight=1.0)
+    assert cm.blind.all()
+    assert len(plan_path(cm, (1.0, 3.0), (9.0, 3.0))) == 2

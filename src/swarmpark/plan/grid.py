@@ -42,6 +42,9 @@ class Costmap:
     grid: OccupancyGrid
     inscribed_m: float
     circumscribed_m: float
+    #: Cells with no wall within the LIDAR's reach (coastal navigation, see
+    #: :func:`build_costmap`); None when paths do not care.
+    blind: np.ndarray | None = None
 
     def lethal(self) -> np.ndarray:
         return ~np.isfinite(self.cost)
@@ -54,11 +57,20 @@ def build_costmap(
     extra_occupied: np.ndarray | None = None,
     *,
     resolution_m: float | None = None,
+    seen_within_m: float | None = None,
+    blind_weight: float = 0.0,
 ) -> Costmap:
     """Inflate ``grid`` (plus ``extra_occupied`` cells, e.g. detected obstacles) for a skid.
 
     With ``resolution_m`` coarser than the map, the map is first coarsened conservatively
     (a coarse cell is occupied if any of its cells is): fewer cells to search.
+
+    Coastal navigation (Roy, Burgard, Fox and Thrun, "Coastal navigation - mobile robot
+    navigation with uncertainty in dynamic environments", ICRA 1999): a skid that localizes
+    with its LIDAR drifts on its odometry wherever no wall is in range. With ``seen_within_m``,
+    cells farther than that from every occupied cell (the map's edge does not count: it is not
+    seen) are *blind*, and each metre through them costs ``blind_weight`` metres more, so paths
+    keep within sight of structure when that is not much longer.
     """
     if extra_occupied is not None:
         grid = OccupancyGrid(grid.occupied | extra_occupied, grid.resolution_m, grid.origin)
@@ -71,7 +83,15 @@ def build_costmap(
     span = max(circumscribed_m - inscribed_m, 1e-9)
     cost = 1.0 + INFLATION_WEIGHT * np.clip((circumscribed_m - d) / span, 0.0, 1.0)
     cost[d < inscribed_m] = np.inf
-    return Costmap(cost, grid, inscribed_m, circumscribed_m)
+    blind = None
+    if seen_within_m is not None:
+        if occ.any():
+            seen = ndimage.distance_transform_edt(~occ) * grid.resolution_m <= seen_within_m
+        else:
+            seen = np.zeros_like(occ)
+        blind = ~seen
+        cost[blind] += blind_weight
+    return Costmap(cost, grid, inscribed_m, circumscribed_m, blind)
 
 
 def _free_disc(
@@ -150,7 +170,7 @@ def plan_path(costmap: Costmap, start_xy, goal_xy, *, free_radius_m: float | Non
             return None
         pts = grid.cell_to_world(cells)
         pts[0], pts[-1] = start_xy, goal_xy
-        return shortcut(pts, cost, grid)
+        return shortcut(pts, cost, grid, costmap.blind)
 
 
 def paths_from(
@@ -198,11 +218,16 @@ def paths_from(
     return out
 
 
-def shortcut(path: np.ndarray, cost: np.ndarray, grid: OccupancyGrid) -> np.ndarray:
+def shortcut(
+    path: np.ndarray, cost: np.ndarray, grid: OccupancyGrid, blind: np.ndarray | None = None
+) -> np.ndarray:
     """Drop waypoints that can be skipped by a straight segment through no costlier cells.
 
     A segment is allowed if every cell it crosses is passable and no costlier than the worst
-    cell of the path it replaces (or 1, the cost outside every inflation band). From each kept
+    cell of the path it replaces (or 1, the cost outside every inflation band), and, given the
+    ``blind`` cells of a coastal costmap (:func:`build_costmap`), if it runs no farther through
+    them than the path it replaces (plus a cell): a straight line must not cut the corner a
+    coastal path took to stay in sight of a wall. From each kept
     waypoint the farthest allowed one is found by galloping and bisection, so a path of K
     cells takes O(log K) line-of-sight checks per kept segment.
     """
@@ -214,6 +239,12 @@ def shortcut(path: np.ndarray, cost: np.ndarray, grid: OccupancyGrid) -> np.ndar
     along[inb] = cost[rc_path[inb, 0], rc_path[inb, 1]]
     step_m = grid.resolution_m / 2
     h, w = cost.shape
+    if blind is not None:
+        # Blind metres along the path up to each waypoint (a step counts if it starts blind).
+        on = np.ones(len(path), bool)
+        on[inb] = blind[rc_path[inb, 0], rc_path[inb, 1]]
+        steps = np.linalg.norm(np.diff(path, axis=0), axis=1) * on[:-1]
+        blind_to = np.concatenate([[0.0], np.cumsum(steps)])
 
     def visible(i: int, j: int) -> bool:
         a, b = path[i], path[j]
@@ -225,7 +256,12 @@ def shortcut(path: np.ndarray, cost: np.ndarray, grid: OccupancyGrid) -> np.ndar
         if row.min() < 0 or col.min() < 0 or row.max() >= h or col.max() >= w:
             return False
         seg = cost[row, col]
-        return bool(np.all(np.isfinite(seg)) and seg.max() <= max(along[i : j + 1].max(), 1.0))
+        if not (np.all(np.isfinite(seg)) and seg.max() <= max(along[i : j + 1].max(), 1.0)):
+            return False
+        if blind is None:
+            return True
+        blind_m = np.count_nonzero(blind[row, col]) * np.linalg.norm(b - a) / n
+        return bool(blind_m <= blind_to[j] - blind_to[i] + grid.resolution_m)
 
     out = [path[0]]
     i, last = 0, len(path) - 1

@@ -46,6 +46,32 @@ ROBOT_STATES = ("idle", "moving", "parked", "stopped", "estopped", "teleop", "st
 TELEOP_TIMEOUT_S = 0.5
 
 
+#: With onboard localization, a wall counts as seen from a cell if it is within this share of
+#: the LIDAR's range: a wall at the range's edge returns a few grazing beams at most, one at
+#: 0.8 of it the beams of a 74 degree fan (coastal navigation, :func:`default_controller`).
+COASTAL_SEEN_FRACTION = 0.8
+
+
+def default_controller(world: World) -> Controller:
+    """The navigation stack of the scenario's ``navigation`` (mode and avoidance). When the
+    skids localize with their LIDAR (``sensing.localization: amcl``), paths keep within sight
+    of walls (coastal navigation, :func:`~swarmpark.plan.grid.build_costmap`): each metre
+    farther than :data:`COASTAL_SEEN_FRACTION` of ``sensing.lidar_range_m`` from every wall
+    costs ``sensing.coastal_weight`` metres more."""
+    from swarmpark.control.nav.params import NavParams, PlannerParams
+    from swarmpark.control.nav.stack import make_controller
+
+    nav, sensing = world.scenario.navigation, world.scenario.sensing
+    params = None
+    if sensing.localization == "amcl" and sensing.coastal_weight > 0:
+        planner = PlannerParams(
+            seen_within_m=COASTAL_SEEN_FRACTION * sensing.lidar_range_m,
+            blind_weight=sensing.coastal_weight,
+        )
+        params = NavParams(avoidance=nav.avoidance, planner=planner)
+    return make_controller(nav.mode, nav.avoidance, params)
+
+
 class Supervisor(CommandsMixin):
     """Runs a :class:`World` with a controller over a robot link.
 
@@ -71,8 +97,6 @@ class Supervisor(CommandsMixin):
         link: RobotLink | Simulator | None = None,
         health: HealthParams | None = None,
     ) -> None:
-        from swarmpark.control.nav.stack import make_controller
-
         self.world = world
         if link is None:
             link = SimLink(world)
@@ -87,13 +111,7 @@ class Supervisor(CommandsMixin):
             raise ValueError(
                 f"link: robots {list(self.info.ids)} differ from the scenario's {world.ids}"
             )
-        self.controller = (
-            controller
-            if controller is not None
-            else make_controller(
-                world.scenario.navigation.mode, world.scenario.navigation.avoidance
-            )
-        )
+        self.controller = controller if controller is not None else default_controller(world)
         n = self.n = self.info.n
         self.ids = list(self.info.ids)
         self.index = {rid: i for i, rid in enumerate(self.ids)}

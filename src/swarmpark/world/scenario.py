@@ -336,6 +336,9 @@ class SensingSpec(_Model):
     dropout_prob: Annotated[float, Field(ge=0, lt=1)] = 0.0
     recovery: bool = False
     cooperative: bool = True
+    #: With ``localization: amcl``, each metre of path out of sight of every wall costs this
+    #: many metres more (coastal navigation; 0: shortest paths).
+    coastal_weight: NonNegFloat = 1.0
     kidnap: list[KidnapSpec] = []
 
 

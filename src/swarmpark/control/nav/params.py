@@ -112,13 +112,21 @@ class PlannerParams:
     #: Points checked along the straight run from a staging point to the goal (0.1 m apart
     #: at the default run-up).
     staging_check_points: int = 10
+    #: Coastal navigation (:func:`~swarmpark.plan.grid.build_costmap`), for skids that
+    #: localize with their LIDAR: cells farther than this from every wall are blind (None:
+    #: no cell is). The supervisor sets it from the scenario's ``sensing``.
+    seen_within_m: float | None = None
+    #: Extra cost per metre through blind cells (0: paths ignore them).
+    blind_weight: float = 0.0
 
     def __post_init__(self) -> None:
         _check(self, {"replan_period_s": ">0", "max_plans_per_tick": "int>0"})
         _check(self, {"max_plan_cells_per_tick": "int>0"})
-        _check(self, {"staging_check_points": "int>0"})
+        _check(self, {"staging_check_points": "int>0", "blind_weight": ">=0"})
         if self.plan_resolution_m is not None:
             _check(self, {"plan_resolution_m": ">0"})
+        if self.seen_within_m is not None:
+            _check(self, {"seen_within_m": ">0"})
 
 
 @dataclass(frozen=True, kw_only=True)

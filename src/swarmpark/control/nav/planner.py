@@ -65,8 +65,14 @@ class Planner:
         if self._grid is not view.grid:
             self._costmaps, self._grid = {}, view.grid
         if key not in self._costmaps:
+            p = self.params
             self._costmaps[key] = build_costmap(
-                view.grid, key[0], key[1], resolution_m=self.params.plan_resolution_m
+                view.grid,
+                key[0],
+                key[1],
+                resolution_m=p.plan_resolution_m,
+                seen_within_m=p.seen_within_m,
+                blind_weight=p.blind_weight,
             )
         return self._costmaps[key]
 
@@ -224,19 +230,19 @@ class Planner:
         if direct is None:
             return None
         if np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
-            return shortcut(direct, cm.cost, cm.grid)
+            return shortcut(direct, cm.cost, cm.grid, cm.blind)
         best, best_cost = None, np.inf
         for stage, head, c in zip(stages, heads, costs[1:], strict=True):
             run = self._run_cost(cm, goal, stage, run_extra)
             if head is None or not np.isfinite(run):
                 continue
-            cand = np.vstack([shortcut(head, cm.cost, cm.grid), goal[:2][None]])
+            cand = np.vstack([shortcut(head, cm.cost, cm.grid, cm.blind), goal[:2][None]])
             # On the static map the shorter path wins; on the fleet layers the cheaper one (a
             # path through the spots of skids still on their way costs more than its length).
             total = path_length(cand) if run_extra is None else c + run
             if total < best_cost:
                 best, best_cost = cand, total
-        return best if best is not None else shortcut(direct, cm.cost, cm.grid)
+        return best if best is not None else shortcut(direct, cm.cost, cm.grid, cm.blind)
 
     def _run_cost(self, cm: Costmap, goal: np.ndarray, stage: np.ndarray, run_extra) -> float:
         """Cost of the straight run from the staging point to the goal: its length, times
