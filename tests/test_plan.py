@@ -78,7 +78,9 @@ def test_coastal_path_keeps_within_sight_of_the_wall():
     assert _blind_metres(path, cm) < 12.0
     assert path[:, 1].max() >= 7.7
     # The longer way is worth it only while it costs less than the blind metres it saves.
-    low = plan_path(build_costmap(deck, 0.4, 0.7, seen_within_m=4.0, blind_weight=0.05), start, goal)
+    low = plan_path(
+        build_costmap(deck, 0.4, 0.7, seen_within_m=4.0, blind_weight=0.05), start, goal
+    )
     assert len(low) == 2
 
 
