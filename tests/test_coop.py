@@ -158,7 +158,7 @@ def test_a_generated_open_deck_parks_with_onboard_localization():
     """Open-deck training site 2018 (6 skids, AMCL with cooperation): the block parks 3.4-4.8 m
     from the east wall and more than 5 m from the others, so nothing in range shows y. With
     200 particles per skid it ended 8 cm off as a block and 2 of 6 parked; with 1000 and
-    shortest paths, 3.8 cm; with coastal paths (the default) 1.5 cm (docs/sensing.md)."""
+    shortest paths, 3.8 cm; with coastal paths (the default) 1.9 cm (docs/sensing.md)."""
     data = generate("open-deck", 2018, robots=6)
     assert data["sensing"]["localization"] == "amcl"
     r = run_world(build_world(parse_scenario(data))).result

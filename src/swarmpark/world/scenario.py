@@ -338,7 +338,7 @@ class SensingSpec(_Model):
     cooperative: bool = True
     #: With ``localization: amcl``, each metre of path out of sight of every wall costs this
     #: many metres more (coastal navigation; 0: shortest paths).
-    coastal_weight: NonNegFloat = 1.0
+    coastal_weight: NonNegFloat = 0.5
     kidnap: list[KidnapSpec] = []
 
 
