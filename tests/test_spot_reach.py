@@ -1,11 +1,20 @@
 """Spots no manoeuvre reaches (plan/spot_reach.py): a rectangle that cannot turn a corner, a
-dead-end slot filled in the wrong order, and the layout report naming the spot."""
+dead-end slot filled in the wrong order (and the order that fills it), and the layout report
+naming the spot."""
 
 import numpy as np
 import pytest
 
 from swarmpark.core.geometry import Footprint
-from swarmpark.plan.spot_reach import _add_hits, _hits, _masks, spot_reach
+from swarmpark.plan.spot_reach import (
+    SpotWindow,
+    _add_hits,
+    _hits,
+    _masks,
+    manoeuvre_blocks,
+    manoeuvre_order,
+    spot_reach,
+)
 
 RES = 0.05
 FP = Footprint(1.2, 0.8, 0.6)
@@ -103,3 +112,42 @@ def test_park_report_names_a_spot_behind_a_tight_corner():
     assert out.accepted and "unreachable_spots" not in out.detail
     (late,) = sup2.metrics.unreachable_spots
     assert late["spot"] == 0 and late["t_s"] == 0.0 and late["reason"] == flag["reason"]
+
+
+def _dead_end_slot():
+    occ = np.zeros((200, 200), bool)
+    occ[int(2 / RES) : int(9.5 / RES), int(4.5 / RES) : int(9.5 / RES)] = True
+    _carve(occ, 5.0, 6.0, 2.0, 6.0)
+    poses = np.array([[5.5, 5.0, np.pi / 2], [5.5, 3.0, np.pi / 2]])  # deep, near the mouth
+    return SpotWindow(occ, np.zeros(2), RES, poses, [FP, FP])
+
+
+def test_a_fill_order_that_walls_in_a_spot_is_turned_round():
+    """The layout asks for the mouth first: the order found fills the deep spot first, and
+    the mouth spot blocks the deep one for the holds."""
+    win = _dead_end_slot()
+    order, flags = manoeuvre_order(win, (1, 0))
+    assert order == (0, 1) and flags == []
+    assert manoeuvre_blocks(win, order) == ((), (0,))
+    # An order that works is kept as it is.
+    assert manoeuvre_order(win, (0, 1)) == ((0, 1), [])
+
+
+def test_a_spot_no_order_reaches_is_flagged_by_the_order():
+    occ = _l_slot()
+    poses = np.array([[5.5, 3.4, np.pi / 2], [7.2, 5.5, 0.0]])
+    win = SpotWindow(occ, np.zeros(2), RES, poses, [FP, FP])
+    order, flags = manoeuvre_order(win, (0, 1))
+    assert [f.spot for f in flags] == [1]
+    assert flags == spot_reach(occ, np.zeros(2), RES, poses, [FP, FP], order)
+
+
+def test_taking_a_spot_away_restores_the_hits():
+    win = _dead_end_slot()
+    win.reachable(0)  # builds the footprint's hit counts on the walls alone
+    ((masks, hits),) = win.tests.values()
+    fresh = hits.copy()
+    win.add(1)
+    assert not np.allclose(hits, fresh)
+    win.remove(1)
+    assert np.abs(hits - fresh).max() == pytest.approx(0.0, abs=1e-9)

@@ -177,6 +177,85 @@ def test_fill_order_holds_a_skid_that_would_overtake_the_one_bound_deeper():
     assert fill_order.held([group], poses).tolist() == [False, False, False]
 
 
+def test_a_follower_keeps_off_its_spot_until_the_one_ahead_has_parked():
+    grid, fps, goals, boundary = _dead_end()
+    blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
+    group = _group(goals, boundary, blocks)
+    # Robot 0 is ahead, still turning into the deepest goal; robots 1 and 2 follow.
+    poses = np.array([[4.8, 2.6, 0.5], [2.0, 2.6, 0.0], [-3.0, 2.6, 0.0]])
+    outside, short = fill_order.holds([group], poses)
+    assert not outside.any()
+    assert short.tolist() == [False, True, True]
+    # Robot 0 parked: robot 1 may take its spot; robot 1 runs straight in along its axis,
+    # so robot 2 may close up behind it (a convoy into a dead end).
+    poses[0] = goals[0]
+    outside, short = fill_order.holds([group], poses)
+    assert not outside.any() and not short.any()
+    # Robot 1 off its axis (turning): robot 2 keeps off its spot again.
+    poses[1] = [3.0, 2.3, 0.4]
+    assert fill_order.holds([group], poses)[1].tolist() == [False, False, True]
+
+
+def test_skids_waiting_at_the_mouth_take_over_the_deeper_goals():
+    grid, fps, goals, boundary = _dead_end()
+    blocks = fill_order.blockers(goals, fps, boundary, (0, 1, 2), grid)
+    group = _group(goals, boundary, blocks)
+    # The deepest goal's skid far behind; the other two wait at the mouth, in its way.
+    poses = np.array([[-3.0, 2.6, 0.0], [1.0, 2.6, 0.0], [2.0, 2.6, 0.0]])
+    assert fill_order.held([group], poses).tolist() == [False, True, True]
+    # A skid whose goal does not fit is never handed one.
+    assert fill_order.hand_over(group, poses, fits=lambda row, goal: False) is None
+    # One swap at a time (the nearest goal first), until the skids are in depth order: the
+    # first in line has the deepest goal, and the second follows it in.
+    for _ in range(4):
+        pair = fill_order.hand_over(group, poses)
+        if pair is None:
+            break
+        a, b = pair
+        group.goal_of[[a, b]] = group.goal_of[[b, a]]
+    assert group.goal_of.tolist() == [2, 1, 0]
+    assert fill_order.hand_over(group, poses) is None
+    assert fill_order.held([group], poses).tolist() == [False, True, False]
+    poses[2] = [4.0, 2.6, 0.0]  # the first in line has gone ahead: the second may follow
+    assert not fill_order.held([group], poses).any()
+
+
+def test_the_supervisor_hands_the_deepest_goal_to_the_first_in_line():
+    """Three skids west of a dead end one skid wide, the last one off to the side: the
+    assignment gives it the deepest goal (the detour costs it least there), which would hold
+    the two ahead of it at the mouth. Within a few ticks the first in line is bound deepest
+    and nobody waits outside."""
+    walls = [
+        [[4, 0], [12, 0], [12, 2.0], [4, 2.0]],
+        [[4, 3.2], [12, 3.2], [12, 5], [4, 5]],
+        [[10, 2.0], [12, 2.0], [12, 3.2], [10, 3.2]],
+    ]
+    world = make_world(
+        map={"size_m": [12, 5], "resolution_m": 0.05, "walls": walls},
+        robots=[
+            {"id": "a", "pose": [1.0, 0.8, 0.0]},
+            {"id": "b", "pose": [2.2, 2.6, 0.0]},
+            {"id": "c", "pose": [3.6, 2.6, 0.0]},
+        ],
+    )
+    sup = Supervisor(world)
+    cmd = ParkCmd(
+        robots=["a", "b", "c"],
+        boundary=[[6.0, 2.0], [10.0, 2.0], [10.0, 3.2], [6.0, 3.2]],
+        heading_deg=0,
+        margin_m=0.05,
+        assignment="euclidean",
+    )
+    assert sup.park(cmd).accepted
+    assert sup.goals[0, 0] == sup.goals[:, 0].max()  # the last one, deepest
+    for _ in range(4):
+        sup.tick()
+    outside, _ = fill_order.holds(sup.groups, sup.poses_known)
+    assert not outside.any()
+    x_goal = sup.goals[:, 0]
+    assert x_goal[2] > x_goal[1] > x_goal[0]  # c, first in line, deepest
+
+
 def test_two_spots_that_shut_a_bay_together_hold_the_second_skid():
     # A bay open to the west (x = 1); the two goals at its mouth, B and C, each leave a lane
     # to the deep goal A, but not both: the layout's pairwise blocks see nothing, and the

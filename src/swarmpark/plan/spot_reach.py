@@ -17,13 +17,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
 from numba import njit
 from scipy.signal import fftconvolve
 
-from swarmpark.core.geometry import Footprint
+from swarmpark.core.geometry import Footprint, footprint_polygon
 from swarmpark.plan.lattice import HEADING_STEPS, HEADINGS, rect_mask, snap_state, stamp_footprint
 
-__all__ = ["SpotReach", "as_report", "spot_reach"]
+__all__ = [
+    "SpotReach",
+    "SpotWindow",
+    "as_report",
+    "manoeuvre_blocks",
+    "manoeuvre_order",
+    "spot_reach",
+]
 
 
 @dataclass(frozen=True)
@@ -53,23 +61,25 @@ def as_report(flags: list[SpotReach]) -> list[dict]:
 
 
 @njit(cache=True)
-def _flood(hits, steps, start, seen, queue):
+def _flood(hits, steps, start, seen, queue, parent):
     """Breadth-first search over lattice states from ``start`` until a state where the skid
-    can turn all the way round or one on the window's edge (True), or every reachable state
-    is seen (False). ``hits[k]`` counts the occupied cells under the footprint at heading
+    can turn all the way round or one on the window's edge (its row in ``queue``, whose
+    ``parent`` rows lead back to ``start`` at row 0), or every reachable state is seen (-1).
+    ``hits[k]`` counts the occupied cells under the footprint at heading
     ``k``, ``hits[16 + k]`` under it half way from heading ``k`` to ``k + 1``, ``hits[32]``
     under the turn-all-round disc. ``seen`` (all False) is left all False again."""
     n_k = steps.shape[0]
     n_r, n_c = hits.shape[1], hits.shape[2]
     queue[0, 0], queue[0, 1], queue[0, 2] = start[0], start[1], start[2]
     seen[start[0], start[1], start[2]] = True
+    parent[0] = -1
     head, tail = 0, 1
-    found = False
+    found = -1
     while head < tail:
         k, r, c = queue[head, 0], queue[head, 1], queue[head, 2]
         head += 1
         if hits[2 * n_k, r, c] < 0.5 or r == 0 or c == 0 or r == n_r - 1 or c == n_c - 1:
-            found = True
+            found = head - 1
             break
         for m in range(4):
             if m < 2:
@@ -86,10 +96,128 @@ def _flood(hits, steps, start, seen, queue):
                 continue
             seen[nk, nr, nc] = True
             queue[tail, 0], queue[tail, 1], queue[tail, 2] = nk, nr, nc
+            parent[tail] = head - 1
             tail += 1
     for q in range(tail):
         seen[queue[q, 0], queue[q, 1], queue[q, 2]] = False
     return found
+
+
+class SpotWindow:
+    """The lattice window of a layout's spots, with any subset of the spots in place.
+
+    Holds the static map's occupied cells around the spots, each spot's footprint stamp
+    (grown by ``grow_m``) and, per footprint, the hit counts of :func:`_masks` on the cells
+    occupied now, kept up to date as spots are put in place (:meth:`add`) or taken away
+    (:meth:`remove`): the correlation is linear in the occupancy, so only the cells that
+    change are convolved. :meth:`reachable` asks whether a skid gets into a spot with the
+    spots in place as obstacles. Parameters as :func:`spot_reach`.
+    """
+
+    def __init__(
+        self,
+        occupied: np.ndarray,
+        origin: np.ndarray,
+        res: float,
+        poses: np.ndarray,
+        footprints: list[Footprint],
+        *,
+        margin_m: float = 3.0,
+        grow_m: float = 0.02,
+    ) -> None:
+        poses = np.asarray(poses, float)
+        reach = max(f.reach_m for f in footprints)
+        lo = poses[:, :2].min(axis=0) - reach - margin_m
+        hi = poses[:, :2].max(axis=0) + reach + margin_m
+        h, w = occupied.shape
+        c0 = max(int(np.floor((lo[0] - origin[0]) / res)), 0)
+        r0 = max(int(np.floor((lo[1] - origin[1]) / res)), 0)
+        c1 = min(int(np.ceil((hi[0] - origin[0]) / res)), w)
+        r1 = min(int(np.ceil((hi[1] - origin[1]) / res)), h)
+        self.origin = np.array([origin[0] + c0 * res, origin[1] + r0 * res])
+        self.res, self.grow_m = res, grow_m
+        self.poses, self.footprints = poses, list(footprints)
+        walls = np.asarray(occupied[r0:r1, c0:c1], bool)
+        n = len(poses)
+        # How many things cover each cell (walls count n + 1, so they never clear).
+        self.count = walls.astype(np.int32) * (n + 1)
+        self.present = np.zeros(n, dtype=bool)
+        self.stamps = []
+        for pose, fp in zip(poses, footprints, strict=True):
+            st = np.zeros(walls.shape, bool)
+            stamp_footprint(st, self.origin, res, pose, fp, grow_m)
+            self.stamps.append(st)
+        self.seen = np.zeros((_K,) + walls.shape, np.bool_)
+        self.queue = np.empty((self.seen.size, 3), np.int64)
+        self.parent = np.empty(self.seen.size, np.int64)
+        self.tests: dict = {}  # per footprint: the 33 masks and their hit counts (up to date)
+
+    def _test(self, fp: Footprint):
+        key = (fp.length_m, fp.width_m, fp.pivot)
+        if key not in self.tests:
+            masks = _masks(fp, self.res, self.grow_m)
+            self.tests[key] = (masks, _hits(self.count > 0, masks))
+        return self.tests[key]
+
+    def add(self, j: int) -> None:
+        """Put spot ``j`` in place."""
+        if self.present[j]:
+            return
+        new = self.stamps[j] & (self.count == 0)
+        self.count += self.stamps[j]
+        self.present[j] = True
+        for masks, hits in self.tests.values():
+            _add_hits(hits, new, masks)
+
+    def remove(self, j: int) -> None:
+        """Take spot ``j`` away."""
+        if not self.present[j]:
+            return
+        self.count -= self.stamps[j]
+        self.present[j] = False
+        freed = self.stamps[j] & (self.count == 0)
+        for masks, hits in self.tests.values():
+            _add_hits(hits, freed, masks, -1.0)
+
+    def reachable(self, j: int) -> bool:
+        """Whether a manoeuvre gets a skid into spot ``j`` (not in place itself) between the
+        walls and the spots in place. A spot off the window is left to the map's own checks
+        (True)."""
+        return self.way_out(j) is not None
+
+    def way_out(self, j: int) -> np.ndarray | None:
+        """The cell centres ``(M, 2)`` of the manoeuvre :meth:`reachable` finds out of spot
+        ``j`` (to where the skid can turn all the way round), or None if there is none; an
+        empty array for a spot off the window."""
+        masks, hits = self._test(self.footprints[j])
+        k, r, c = snap_state(self.poses[j], self.origin, self.res)
+        if not (0 <= r < hits.shape[1] and 0 <= c < hits.shape[2]):
+            return np.zeros((0, 2))
+        keep = hits[k, r, c]
+        hits[k, r, c] = 0.0  # the spot itself is clear by the layout's construction
+        start = np.array([k, r, c], np.int64)
+        end = _flood(hits, HEADING_STEPS, start, self.seen, self.queue, self.parent)
+        hits[k, r, c] = keep
+        if end < 0:
+            return None
+        rows = []
+        while end >= 0:
+            rows.append(end)
+            end = self.parent[end]
+        cells = self.queue[np.array(rows), 1:]
+        return self.origin + (cells[:, ::-1] + 0.5) * self.res
+
+    def flag(self, j: int, before: int) -> SpotReach:
+        """The flag of spot ``j``, unreachable with ``before`` spots in place."""
+        fp = self.footprints[j]
+        pose = self.poses[j]
+        return SpotReach(
+            int(j),
+            (float(pose[0]), float(pose[1]), float(pose[2])),
+            "no manoeuvre (forwards, backwards, turning on the spot) gets a "
+            f"{fp.length_m:g} x {fp.width_m:g} m skid in between the walls"
+            + (f" and the {before} spot(s) filled before it" if before else ""),
+        )
 
 
 def spot_reach(
@@ -119,52 +247,86 @@ def spot_reach(
         The search window is the spots' bounding box grown by this; a skid that reaches the
         window's edge counts as out.
     """
-    poses = np.asarray(poses, float)
-    reach = max(f.reach_m for f in footprints)
-    lo = poses[:, :2].min(axis=0) - reach - margin_m
-    hi = poses[:, :2].max(axis=0) + reach + margin_m
-    h, w = occupied.shape
-    c0 = max(int(np.floor((lo[0] - origin[0]) / res)), 0)
-    r0 = max(int(np.floor((lo[1] - origin[1]) / res)), 0)
-    c1 = min(int(np.ceil((hi[0] - origin[0]) / res)), w)
-    r1 = min(int(np.ceil((hi[1] - origin[1]) / res)), h)
-    win_origin = np.array([origin[0] + c0 * res, origin[1] + r0 * res])
-    occ = np.asarray(occupied[r0:r1, c0:c1], bool).copy()
-    seen = np.zeros((_K,) + occ.shape, np.bool_)
-    queue = np.empty((seen.size, 3), np.int64)
-    tests = {}  # per footprint: the 33 masks and their hit counts on occ (kept up to date)
+    win = SpotWindow(occupied, origin, res, poses, footprints, margin_m=margin_m, grow_m=grow_m)
     out: list[SpotReach] = []
     for n, j in enumerate(fill_order):
-        fp = footprints[j]
-        key = (fp.length_m, fp.width_m, fp.pivot)
-        if key not in tests:
-            masks = _masks(fp, res, grow_m)
-            tests[key] = (masks, _hits(occ, masks))
-        masks, hits = tests[key]
-        k, r, c = snap_state(poses[j], win_origin, res)
-        found = True  # a spot off the map window: the map's own checks speak for it
-        if 0 <= r < occ.shape[0] and 0 <= c < occ.shape[1]:
-            keep = hits[k, r, c]
-            hits[k, r, c] = 0.0  # the spot itself is clear by the layout's construction
-            found = _flood(hits, HEADING_STEPS, np.array([k, r, c], np.int64), seen, queue)
-            hits[k, r, c] = keep
-        if not found:
-            before = n
-            out.append(
-                SpotReach(
-                    int(j),
-                    (float(poses[j, 0]), float(poses[j, 1]), float(poses[j, 2])),
-                    "no manoeuvre (forwards, backwards, turning on the spot) gets a "
-                    f"{fp.length_m:g} x {fp.width_m:g} m skid in between the walls"
-                    + (f" and the {before} spot(s) filled before it" if before else ""),
-                )
-            )
-        before_occ = occ.copy()
-        stamp_footprint(occ, win_origin, res, poses[j], fp, grow_m)
-        new = occ & ~before_occ
-        for masks, hits in tests.values():
-            _add_hits(hits, new, masks)
+        if not win.reachable(j):
+            out.append(win.flag(j, n))
+        win.add(j)
     return out
+
+
+def manoeuvre_order(
+    win: SpotWindow, prefer: tuple[int, ...]
+) -> tuple[tuple[int, ...], list[SpotReach]]:
+    """A fill order in which a manoeuvre reaches every spot with the spots before it in
+    place, when there is one, and the spots it cannot make reachable (flagged).
+
+    Built backwards: with every spot in place, the last spot to fill must be reachable with
+    all the others in place; take it away and find the one before it likewise. Reachability
+    only grows as spots are taken away, so taking any reachable spot never spoils a later
+    choice: if some order works, this finds one (and flags nothing). Among the reachable
+    spots the one latest in ``prefer`` (the layout's order) is taken, so a layout whose order
+    works is kept as it is. When none is reachable the latest in ``prefer`` is taken and
+    flagged. ``win`` is left with no spot in place.
+    """
+    for j in prefer:
+        win.add(j)
+    left = list(prefer)
+    backwards: list[int] = []
+    stuck: list[int] = []
+    while left:
+        pick = None
+        for j in reversed(left):
+            win.remove(j)
+            if win.reachable(j):
+                pick = j
+                break
+            win.add(j)
+        if pick is None:
+            pick = left[-1]
+            win.remove(pick)
+            stuck.append(pick)
+        backwards.append(pick)
+        left.remove(pick)
+    order = tuple(backwards[::-1])
+    pos = {j: n for n, j in enumerate(order)}
+    return order, [win.flag(j, pos[j]) for j in sorted(stuck, key=pos.get)]
+
+
+def manoeuvre_blocks(win: SpotWindow, order: tuple[int, ...]) -> tuple[tuple[int, ...], ...]:
+    """For each spot k, the spots j before it in ``order`` that a manoeuvre reaches with the
+    spots before j in place but not once k is in place too: k must stay free until they are
+    filled (as :func:`swarmpark.supervisor.fill_order.blockers`, for the rectangle instead of
+    a disc). ``win`` must have no spot in place; it is left so."""
+    blocks: list[set[int]] = [set() for _ in range(len(win.poses))]
+    # A spot whose footprint keeps off the way out found for j cannot shut it: only the
+    # others are put in place and j searched again.
+    grow = win.grow_m + win.res
+    feet = np.array(
+        [
+            footprint_polygon(p, f).buffer(grow)
+            for p, f in zip(win.poses, win.footprints, strict=True)
+        ],
+        dtype=object,
+    )
+    for n, j in enumerate(order):
+        way = win.way_out(j)
+        if way is not None and len(way):
+            swept = shapely.LineString(np.vstack([way, way[-1:]])).buffer(
+                win.footprints[j].reach_m + grow
+            )
+            later = np.array(order[n + 1 :], dtype=int)
+            near = later[shapely.intersects(feet[later], swept)] if len(later) else later
+            for k in near.tolist():
+                win.add(k)
+                if not win.reachable(j):
+                    blocks[k].add(j)
+                win.remove(k)
+        win.add(j)
+    for j in order:
+        win.remove(j)
+    return tuple(tuple(sorted(b)) for b in blocks)
 
 
 _K = len(HEADING_STEPS)
@@ -194,9 +356,10 @@ def _hits(occ: np.ndarray, masks: np.ndarray) -> np.ndarray:
     return fftconvolve(stack, masks[:, ::-1, ::-1], mode="same", axes=(1, 2))
 
 
-def _add_hits(hits: np.ndarray, new: np.ndarray, masks: np.ndarray) -> None:
-    """Add the hits of newly occupied cells ``new`` to ``hits`` (in place), on the box around
-    them only: the correlation is linear in the occupancy."""
+def _add_hits(hits: np.ndarray, new: np.ndarray, masks: np.ndarray, sign: float = 1.0) -> None:
+    """Add the hits of newly occupied cells ``new`` to ``hits`` (in place; ``sign`` -1:
+    take away those of newly freed cells), on the box around them only: the correlation is
+    linear in the occupancy."""
     rows, cols = np.nonzero(new)
     if not rows.size:
         return
@@ -209,4 +372,4 @@ def _add_hits(hits: np.ndarray, new: np.ndarray, masks: np.ndarray) -> None:
     ys, xs = max(y0, 0), max(x0, 0)
     ye, xe = min(y0 + patch.shape[0] + 2 * r, h), min(x0 + patch.shape[1] + 2 * r, w)
     full = fftconvolve(patch[None], masks[:, ::-1, ::-1], mode="full", axes=(1, 2))
-    hits[:, ys:ye, xs:xe] += full[:, ys - y0 : ye - y0, xs - x0 : xe - x0]
+    hits[:, ys:ye, xs:xe] += sign * full[:, ys - y0 : ye - y0, xs - x0 : xe - x0]

@@ -19,10 +19,11 @@ from shapely.geometry import Point, Polygon
 from shapely.ops import nearest_points
 
 from swarmpark import assign as assign_mod
-from swarmpark.core.geometry import GeometryError, as_simple_polygon
+from swarmpark.core.geometry import GeometryError, as_simple_polygon, footprint_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 from swarmpark.plan.spot_reach import as_report, spot_reach
+from swarmpark.supervisor import fill_order
 from swarmpark.supervisor.fill_order import Reach
 from swarmpark.supervisor.known_map import KnownMap, OperatorMap, SensedMap
 from swarmpark.supervisor.registry import COMMANDS
@@ -65,6 +66,8 @@ class ParkPlan:
     bound_inputs: tuple
     #: Whether the manoeuvre check of the spots ran (else the metrics run it after the run).
     reach_checked: bool = True
+    #: The spots no manoeuvre reaches, if the fill order found them (then not checked again).
+    flags: list | None = None
 
 
 @dataclass
@@ -199,8 +202,9 @@ class CommandsMixin:
         goals = np.asarray(lay.poses, float)
         fps = [self.info.footprints[i] for i in idx]
         report = dict(lay.report)
-        if check_reach:
-            self._flag_unreachable(report, goals, fps, tuple(lay.fill_order))
+        order, blocks, reach, flags = self._fill_holds(goals, fps, boundary, tuple(lay.fill_order))
+        if check_reach or flags is not None:
+            self._flag_unreachable(report, goals, fps, order, flags)
         fits = assign_mod.footprint_fits(
             [(f.length_m, f.width_m) for f in fps], [(f.length_m, f.width_m) for f in fps]
         )
@@ -209,13 +213,12 @@ class CommandsMixin:
             goal_of = assign_mod.assign(cost)
         except assign_mod.AssignmentError as exc:
             return str(exc)
-        blocks, reach = self._blockers(goals, fps, boundary, tuple(lay.fill_order))
         group = ParkGroup(
             idx,
             goals,
             cmd.assignment,
             goal_of,
-            tuple(lay.fill_order),
+            order,
             boundary,
             lay.method,
             report,
@@ -231,19 +234,23 @@ class CommandsMixin:
             min(f.width_m for f in fps) / 2,
             self.info.max_speed_mps[idx],
         )
-        return ParkPlan(group, bound_inputs, check_reach)
+        return ParkPlan(group, bound_inputs, check_reach, flags)
 
-    def _flag_unreachable(self, report: dict, goals: np.ndarray, fps, order) -> None:
+    def _flag_unreachable(
+        self, report: dict, goals: np.ndarray, fps, order, flagged: list | None = None
+    ) -> None:
         """Flag, in the layout report, the spots no manoeuvre gets a skid into in fill order
-        (:mod:`swarmpark.plan.spot_reach`): the operator sees them before confirming; the
-        skids still try. Parks of more than ``MAX_REACH_CHECKED`` spots are not checked (the
-        check costs a few ms per spot), and the report says so."""
-        if len(goals) > MAX_REACH_CHECKED:
+        (:mod:`swarmpark.plan.spot_reach`; ``flagged`` if already found): the operator sees
+        them before confirming; the skids still try. Parks of more than
+        ``MAX_REACH_CHECKED`` spots are not checked (the check costs a few ms per spot), and
+        the report says so."""
+        if flagged is None and len(goals) > MAX_REACH_CHECKED:
             report["notices"] = list(report.get("notices", [])) + [
                 f"manoeuvre check skipped: {len(goals)} spots (checked up to {MAX_REACH_CHECKED})"
             ]
             return
-        flagged = self._spot_check(goals, fps, order)()
+        if flagged is None:
+            flagged = self._spot_check(goals, fps, order)()
         if not flagged:
             return
         report["unreachable_spots"] = as_report(flagged)
@@ -276,7 +283,10 @@ class CommandsMixin:
         self.metrics.defer_lower_bound(*plan.bound_inputs)
         if not plan.reach_checked and len(goals) <= MAX_REACH_CHECKED:
             fps = [self.info.footprints[i] for i in idx]
-            check = self._spot_check(np.array(goals), fps, tuple(group.fill_order))
+            if plan.flags is not None:
+                check = partial(list, plan.flags)
+            else:
+                check = self._spot_check(np.array(goals), fps, tuple(group.fill_order))
             self.metrics.defer_spot_check(self.t, check)
         extra = {}
         if group.report.get("unreachable_spots"):
@@ -498,6 +508,36 @@ class CommandsMixin:
                 g.goal_of = new
                 self._set_goals(g.robots, g.goals[new])
 
+    def _hand_over(self) -> None:
+        """Swap the goals of a skid waiting outside for a deeper one and the skid it waits
+        for, when it stands nearer that deeper goal (:func:`.fill_order.hand_over`), unless
+        the swap costs more than the re-assignment's hysteresis (which would undo it)."""
+        for g in self.groups:
+            if g.cost == "sequential" or (g.reach is None and not any(g.blocks)):
+                continue
+            dims = [(f.length_m, f.width_m) for f in (self.info.footprints[i] for i in g.robots)]
+            fit = assign_mod.footprint_fits(dims, g.goal_dims)
+            pair = fill_order.hand_over(
+                g, self.poses_known, (lambda a, j, fit=fit: bool(fit[a, j])) if fit.size else None
+            )
+            if pair is None:
+                continue
+            a, b = pair
+            new = g.goal_of.copy()
+            new[a], new[b] = g.goal_of[b], g.goal_of[a]
+            if g.cost != "path":
+                # Kept only if the re-assignment would not undo it (its hysteresis).
+                cost = self._cost_matrix(g.robots, g.goals, g.cost, fit)
+                rows = np.arange(len(new))
+                now = cost[rows, new].sum()
+                best = cost[rows, assign_mod.assign(cost)].sum()
+                margin = max(assign_mod.HYSTERESIS_FRACTION * now, assign_mod.HYSTERESIS_ABS_M)
+                if now - best > margin:
+                    continue
+            g.switches += 2
+            g.goal_of = new
+            self._set_goals(g.robots, g.goals[new])
+
     def _reassign_local(self, g, dims, locked) -> tuple[np.ndarray, bool]:
         """A large group's re-assignment by swaps between neighbours (O(n k), not O(n^3))."""
         rd, gd = np.asarray(dims, float), np.asarray(g.goal_dims, float).reshape(-1, 2)
@@ -515,9 +555,17 @@ class CommandsMixin:
             locked=locked,
         )
 
-    def hold_zones(self) -> list:
+    def hold_zones(self, short: np.ndarray | None = None) -> list:
+        """Where each robot held back by the fill order waits outside of: its parking
+        boundary, or for the robots in ``short`` (following a skid bound deeper) its own
+        spot grown by the room the skid needs to turn on the spot (its reach)."""
         zones: list = [None] * self.n
         for g in self.groups:
-            for r in g.robots:
-                zones[r] = g.boundary
+            for row, r in enumerate(g.robots):
+                if short is not None and short[r]:
+                    fp = self.info.footprints[r]
+                    spot = footprint_polygon(g.goals[g.goal_of[row]], fp)
+                    zones[r] = spot.buffer(fp.reach_m)
+                else:
+                    zones[r] = g.boundary
         return zones

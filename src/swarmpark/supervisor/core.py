@@ -29,6 +29,7 @@ from swarmpark.metrics import (
     MetricsRecorder,
     goal_errors,
 )
+from swarmpark.plan.spot_reach import SpotWindow, manoeuvre_blocks, manoeuvre_order
 from swarmpark.sim.link import SimLink
 from swarmpark.sim.simulator import Simulator, StepResult
 from swarmpark.supervisor import fill_order, reports
@@ -240,16 +241,40 @@ class Supervisor(CommandsMixin):
 
     # ------------------------------------------------------------------ fill order
 
-    def _blockers(self, goals: np.ndarray, fps, boundary, order):
-        """Fill-order holds of a new group on the planning map: the blocks of the layout's
-        fill order (:func:`.fill_order.blockers`) and the group's :class:`.fill_order.Reach`
-        (None for a group without holds)."""
+    def _fill_holds(self, goals: np.ndarray, fps, boundary, order):
+        """Fill-order holds of a new group on the planning map: ``(order, blocks, reach,
+        flags)``.
+
+        For a group with holds (:func:`.fill_order.reach`), the order is first made one in
+        which a manoeuvre reaches every spot with the spots before it in place, where the
+        layout's is not (:func:`swarmpark.plan.spot_reach.manoeuvre_order`), and a goal
+        blocks those its rectangle would shut out (:func:`~swarmpark.plan.spot_reach.
+        manoeuvre_blocks`) as well as those it shuts out for a disc
+        (:func:`.fill_order.blockers`); ``flags`` is then empty, else None (the spots are
+        checked in the layout's order as before)."""
         r = fill_order.reach(goals, fps, boundary, self.known_grid)
-        return fill_order.blockers(goals, fps, boundary, order, self.known_grid, r), r
+        flags, lattice = None, ()
+        if r is not None:
+            grid = self.park_map.grid()
+            win = SpotWindow(grid.occupied, grid.origin, grid.resolution_m, goals, list(fps))
+            found, stuck = manoeuvre_order(win, order)
+            if not stuck:
+                # With spots no order reaches, the layout's is kept (filling those first
+                # made the skids try the hopeless spots first: measured, see the docs).
+                order, flags = found, []
+            lattice = manoeuvre_blocks(win, order)
+        blocks = fill_order.blockers(goals, fps, boundary, order, self.known_grid, r)
+        if lattice:
+            blocks = tuple(
+                tuple(sorted(set(a) | set(b))) for a, b in zip(blocks, lattice, strict=True)
+            )
+        return order, blocks, r, flags
 
     def held(self) -> np.ndarray:
-        """Robots that must wait outside their boundary (:func:`.fill_order.held`)."""
-        return fill_order.held(self.groups, self.poses_known)
+        """Robots the fill order holds back (:func:`.fill_order.holds`): outside their
+        boundary, or short of their own spot."""
+        outside, short = fill_order.holds(self.groups, self.poses_known)
+        return outside | short
 
     # ------------------------------------------------------------------ the tick
 
@@ -272,7 +297,7 @@ class Supervisor(CommandsMixin):
             return "stopped by the operator"
         held = self.held()
         if len(held) == self.n and held[i]:
-            return "held outside its boundary by the fill order"
+            return "held back by the fill order"
         explain = getattr(self.controller, "explain", None)
         if explain is None:
             return "no progress"
@@ -287,6 +312,7 @@ class Supervisor(CommandsMixin):
 
     def view(self) -> ControlView:
         info = self.info
+        outside, short = fill_order.holds(self.groups, self.poses_known)
         if self.sensing is not None:
             # Onboard sensing: avoid the walls and what the scans detected (people included,
             # as still obstacles refreshed every scan), not the scenario's obstacles and people;
@@ -326,10 +352,10 @@ class Supervisor(CommandsMixin):
             people_radius=prad,
             static_pieces=static_pieces,
             goal_changed=self.goal_changed.copy(),
-            hold=self.held(),
+            hold=outside | short,
             # A lost robot is an immobile obstacle at its last known pose.
             stopped=self.stopped | self.teleop | self.estopped | self.health.faulted,
-            hold_zones=tuple(self.hold_zones()),
+            hold_zones=tuple(self.hold_zones(short)),
         )
 
     def _commands(self, view: ControlView) -> np.ndarray:
@@ -365,6 +391,7 @@ class Supervisor(CommandsMixin):
             self._run_due_kidnaps()
         self.inbox.absorb(self.link.receive())
         self._reassign()
+        self._hand_over()
         view = self.view()
         cmd = self._commands(view)
         self.goal_changed[:] = False

@@ -26,6 +26,8 @@ __all__ = [
     "Reach",
     "blockers",
     "held",
+    "holds",
+    "hand_over",
     "reach",
     "BLOCKING_RESOLUTION_M",
     "BLOCKING_MAX_GOALS",
@@ -164,21 +166,86 @@ def held(groups, poses: np.ndarray) -> np.ndarray:
     poses
         ``(N, 3)`` the poses the fleet decides from (estimates with onboard localization).
     """
-    hold = np.zeros(len(poses), dtype=bool)
+    return holds(groups, poses)[0]
+
+
+def holds(groups, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(outside, short)``, each ``(N,)`` bool: the robots :func:`held` outside their
+    boundary, and those that follow a skid bound deeper (not held) that is still turning
+    towards its goal (off the goal's axis or heading). A follower may come near, but keeps
+    off its own spot until the skid ahead is on its straight run in: that skid may still
+    need the room to turn, and a follower parked beside it early would shut it out. A
+    convoy into a dead end, each skid on its axis, closes up as before."""
+    outside = np.zeros(len(poses), dtype=bool)
+    short = np.zeros(len(poses), dtype=bool)
     for g in groups:
-        r = g.reach
-        if r is None and (not g.blocks or not any(g.blocks)):
-            continue
-        pos_err, head_err = goal_errors(poses[g.robots], g.goals[g.goal_of])
-        parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
-        filled = np.zeros(len(g.goals), dtype=bool)
-        filled[g.goal_of[parked]] = True
-        to_go = np.full(len(g.goals), np.inf)  # distance of each goal's skid to it
-        to_go[g.goal_of] = pos_err
-        taken = frozenset(np.flatnonzero(filled).tolist())
-        for rob, k, d in zip(g.robots, g.goal_of, pos_err, strict=True):
-            first = [j for j in (g.blocks[k] if g.blocks else ()) if not filled[j]]
-            if r is not None:
-                first += np.flatnonzero(r.cut_off(taken, int(k))).tolist()
-            hold[rob] = any(to_go[j] >= d for j in first)
-    return hold
+        for row, waits, ahead in _waits(g, poses):
+            outside[g.robots[row]] = bool(waits)
+            short[g.robots[row]] = not waits and bool(ahead)
+    return outside, short
+
+
+def hand_over(g, poses: np.ndarray, fits=None) -> tuple[int, int] | None:
+    """A swap of goals that ends a wait: rows ``(a, b)`` of group ``g`` (as :func:`held`),
+    or None.
+
+    Skid a waits outside because its goal k would cut off goal j, whose skid b is farther
+    from j than a is from k. When a is nearer to j than b is, a stands between b and j (the
+    usual case: a came first and waits at the mouth b must pass through), so a takes j and b
+    takes k. The skids of a group are interchangeable, so the swap costs nothing but the
+    difference in distance, and a follows nobody: this is the target swap of TSWAP (Okumura
+    and Defago, "Solving simultaneously target assignment and path planning efficiently with
+    time-independent execution", AIJ 2023), where an agent blocked by one waiting on its way
+    takes over that agent's target. The nearest such j is handed over first; one swap per
+    call. ``fits(a, j)``: whether row a's skid fits goal j (all do if None).
+    """
+    xy = poses[g.robots, :2]
+    row_of = {int(k): r for r, k in enumerate(g.goal_of)}
+    best = None
+    for a, waits, _ in _waits(g, poses):
+        for j in waits:
+            b = row_of.get(int(j))
+            if b is None:
+                continue
+            k = int(g.goal_of[a])
+            d_aj = float(np.hypot(*(xy[a] - g.goals[j, :2])))
+            d_bj = float(np.hypot(*(xy[b] - g.goals[j, :2])))
+            if d_aj >= d_bj:
+                continue
+            if fits is not None and not (fits(a, int(j)) and fits(b, k)):
+                continue
+            if best is None or d_aj < best[0]:
+                best = (d_aj, a, b)
+    return None if best is None else (best[1], best[2])
+
+
+def _waits(g, poses: np.ndarray):
+    """For each row of group ``g`` (:func:`held`), the goals it waits for: not filled, cut
+    off by its goal, their skid no nearer to them than it is to its own; and those it
+    follows: not filled, cut off by its goal, their skid nearer but still turning (off its
+    goal's axis or heading). Yields ``(row, waits, follows)``; nothing for a group without
+    holds."""
+    r = g.reach
+    if r is None and (not g.blocks or not any(g.blocks)):
+        return
+    pos_err, head_err = goal_errors(poses[g.robots], g.goals[g.goal_of])
+    parked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+    filled = np.zeros(len(g.goals), dtype=bool)
+    filled[g.goal_of[parked]] = True
+    to_go = np.full(len(g.goals), np.inf)  # distance of each goal's skid to it
+    to_go[g.goal_of] = pos_err
+    # A skid on its goal's axis, facing along it, has only its straight run in to go: it
+    # needs no room to turn (within the parking tolerances).
+    goal = g.goals[g.goal_of]
+    rel = poses[g.robots, :2] - goal[:, :2]
+    lateral = np.abs(rel[:, 1] * np.cos(goal[:, 2]) - rel[:, 0] * np.sin(goal[:, 2]))
+    turning = np.zeros(len(g.goals), dtype=bool)
+    turning[g.goal_of] = (lateral > POSITION_TOL_M) | (head_err > HEADING_TOL_RAD)
+    taken = frozenset(np.flatnonzero(filled).tolist())
+    for row, (k, d) in enumerate(zip(g.goal_of, pos_err, strict=True)):
+        first = [j for j in (g.blocks[k] if g.blocks else ()) if not filled[j]]
+        if r is not None:
+            first += np.flatnonzero(r.cut_off(taken, int(k))).tolist()
+        first = sorted({int(j) for j in first})
+        waits = [j for j in first if to_go[j] >= d]
+        yield row, waits, [j for j in first if to_go[j] < d and turning[j]]
