@@ -121,13 +121,24 @@ def test_a_walled_in_skid_ranks_above_all_until_it_docks_and_parked_skids_make_r
 
 
 @pytest.mark.slow
-def test_a_walled_in_spot_is_reached_once_a_neighbour_makes_room():
+def test_a_walled_in_spot_is_reached_once_a_neighbour_makes_room(monkeypatch):
     # Generated open deck (training seed 2005), truth localization: two rows of three spots
-    # facing east, 0.3-0.5 m apart, so a middle spot is entered along its axis only. Its skid
-    # arrives last, between parked neighbours: walled in, it outranks them, an end skid backs
-    # out of the row and docks again. Without the rule it stays 0.58 m off its spot.
+    # facing east, 0.3-0.5 m apart, so a middle spot is entered along its axis only. With the
+    # fill order's holds (the rectangle's blocks, followers short of their spot) its
+    # neighbours wait for it, and the site parks with or without the rule.
     data = generate("open-deck", 2005, robots=6)
     data.pop("sensing")
+    off = Navigator(NavParams(make_room=MakeRoomParams(for_walled=False)))
+    r = run_world(build_world(parse_scenario(data)), controller=off).result
+    assert r["success"] and r["collisions"] == []
+    # Without the holds its skid arrives last, between parked neighbours: walled in, it
+    # outranks them, an end skid backs out of the row and docks again. Without the rule as
+    # well it stays 0.58 m off its spot.
+    monkeypatch.setattr(
+        Supervisor,
+        "_fill_holds",
+        lambda self, goals, fps, boundary, order: (order, tuple(() for _ in goals), None, None),
+    )
     r = run_world(build_world(parse_scenario(data))).result
     assert r["success"] and r["collisions"] == []
     assert all(s["final_position_error_m"] <= 0.05 for s in r["robots"].values())

@@ -66,7 +66,8 @@ class ParkPlan:
     bound_inputs: tuple
     #: Whether the manoeuvre check of the spots ran (else the metrics run it after the run).
     reach_checked: bool = True
-    #: The spots no manoeuvre reaches, if the fill order found them (then not checked again).
+    #: The spots no manoeuvre reaches, when the fill order's search already knows them
+    #: (empty: it found an order that reaches every spot); None: check them as usual.
     flags: list | None = None
 
 
