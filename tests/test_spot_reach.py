@@ -46,13 +46,24 @@ def test_a_spot_behind_a_corner_too_tight_to_turn_is_flagged():
     assert spot_reach(occ, np.zeros(2), RES, poses, [FP, FP], (1,)) == []
 
 
-def test_the_fill_order_decides_a_dead_end_slot():
-    """Two spots in a dead-end slot one skid wide: deepest first both are reached; the other
-    way round the deep one is walled in by the first."""
+def _dead_end_slot():
+    """A dead-end slot one skid wide going up from the block's lower edge, and two spots in
+    it: the deep one, the one near the mouth."""
     occ = np.zeros((200, 200), bool)
     occ[int(2 / RES) : int(9.5 / RES), int(4.5 / RES) : int(9.5 / RES)] = True
     _carve(occ, 5.0, 6.0, 2.0, 6.0)
-    poses = np.array([[5.5, 5.0, np.pi / 2], [5.5, 3.0, np.pi / 2]])  # deep, near the mouth
+    return occ, np.array([[5.5, 5.0, np.pi / 2], [5.5, 3.0, np.pi / 2]])
+
+
+def _slot_window():
+    occ, poses = _dead_end_slot()
+    return SpotWindow(occ, np.zeros(2), RES, poses, [FP, FP])
+
+
+def test_the_fill_order_decides_a_dead_end_slot():
+    """Two spots in a dead-end slot one skid wide: deepest first both are reached; the other
+    way round the deep one is walled in by the first."""
+    occ, poses = _dead_end_slot()
     assert spot_reach(occ, np.zeros(2), RES, poses, [FP, FP], (0, 1)) == []
     flagged = spot_reach(occ, np.zeros(2), RES, poses, [FP, FP], (1, 0))
     assert [f.spot for f in flagged] == [0]
@@ -114,18 +125,10 @@ def test_park_report_names_a_spot_behind_a_tight_corner():
     assert late["spot"] == 0 and late["t_s"] == 0.0 and late["reason"] == flag["reason"]
 
 
-def _dead_end_slot():
-    occ = np.zeros((200, 200), bool)
-    occ[int(2 / RES) : int(9.5 / RES), int(4.5 / RES) : int(9.5 / RES)] = True
-    _carve(occ, 5.0, 6.0, 2.0, 6.0)
-    poses = np.array([[5.5, 5.0, np.pi / 2], [5.5, 3.0, np.pi / 2]])  # deep, near the mouth
-    return SpotWindow(occ, np.zeros(2), RES, poses, [FP, FP])
-
-
 def test_a_fill_order_that_walls_in_a_spot_is_turned_round():
     """The layout asks for the mouth first: the order found fills the deep spot first, and
     the mouth spot blocks the deep one for the holds."""
-    win = _dead_end_slot()
+    win = _slot_window()
     order, flags = manoeuvre_order(win, (1, 0))
     assert order == (0, 1) and flags == []
     assert manoeuvre_blocks(win, order) == ((), (0,))
@@ -143,7 +146,7 @@ def test_a_spot_no_order_reaches_is_flagged_by_the_order():
 
 
 def test_taking_a_spot_away_restores_the_hits():
-    win = _dead_end_slot()
+    win = _slot_window()
     win.reachable(0)  # builds the footprint's hit counts on the walls alone
     ((masks, hits),) = win.tests.values()
     fresh = hits.copy()
