@@ -72,6 +72,9 @@ def test_deadlock_is_reported_when_pushing_into_a_wall():
     assert 2.0 < dl["start_s"] < 3.5
     # A scripted controller cannot say why: the cause says so.
     assert dl["cause"] == "no progress"
+    # Where it stood when reported: against the wall, 3.6 m short of its goal.
+    assert dl["pose"][0] == pytest.approx(3.4, abs=0.05) and dl["pose"][2] == pytest.approx(0)
+    assert dl["goal_distance_m"] == pytest.approx(3.6, abs=0.05)
 
 
 def test_deadlock_names_its_cause_from_the_navigator():

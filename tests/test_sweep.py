@@ -11,7 +11,7 @@ import yaml
 
 from swarmpark.apps.cli import main
 from swarmpark.apps.sweep import SpecError, load_spec, run_sweep
-from swarmpark.apps.sweep_report import flatten_result, summarize
+from swarmpark.apps.sweep_report import flatten_result, records_table, summarize
 
 TINY = {
     "name": "tiny",
@@ -176,3 +176,26 @@ def test_no_run_rebuilds_the_report_from_records_only(tmp_path, tiny):
     df = pd.read_parquet(out / "results.parquet")
     assert df["time_over_bound"].tolist() == [1.5] and df["parked"].tolist() == [True]
     assert "| tiny | 1 | 0 | 1.00 |" in (out / "summary.md").read_text()
+
+
+def test_deadlocks_are_split_by_where_they_were_reported(tmp_path):
+    def record(dls):
+        res = {"success": False, "collisions": [], "deadlocks": dls, "robots": {}}
+        job = {"job_id": "j", "kind": "door", "source": "generate:door", "seed": 0,
+               "robots": 4, "duration_s": None, "params": {}}  # fmt: skip
+        return {"job": job, "error": None, "wall_s": 1.0, "attempts": 1, "result": res}
+
+    far, near = {"goal_distance_m": 5.2}, {"goal_distance_m": 0.4}
+    (tmp_path / "records").mkdir()
+    for jid, dls in {"a": [far, near, near], "b": [far]}.items():
+        (tmp_path / "records" / f"{jid}.json").write_text(json.dumps(record(dls)))
+    df = records_table(tmp_path, ["a", "b"])
+    assert df["n_deadlocks_parking"].tolist() == [2, 0]
+    row = summarize(df)["overall"].iloc[0]
+    assert row["deadlocks"] == 4 and row["deadlocks_parking"] == 2
+    # A result from before deadlocks carried their distance: the split is unknown, not 0.
+    (tmp_path / "records" / "b.json").write_text(json.dumps(record([{"start_s": 1.0}])))
+    assert (
+        summarize(records_table(tmp_path, ["a", "b"]))["overall"]["deadlocks_parking"].iloc[0]
+        is None
+    )

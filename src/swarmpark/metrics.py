@@ -51,13 +51,16 @@ class Deadlock:
     """A deadlock episode: a robot with an unreached goal and no progress since ``start_s``
     (reported once that has lasted :data:`DEADLOCK_WINDOW_S`, so every reported episode is a
     defect), until progress or a pause ends it, and what the controller said held it when it
-    was reported (``cause``)."""
+    was reported (``cause``), with where it stood then (``pose``, x, y, heading in rad) and
+    how far from its goal (``goal_distance_m``): at its spot, or held up on the way."""
 
     robot: str
     start_s: float
     end_s: float | None = None
     resolved_by: str | None = None
     cause: str | None = None
+    pose: tuple[float, float, float] | None = None
+    goal_distance_m: float | None = None
 
     def as_dict(self) -> dict:
         dur = None if self.end_s is None else round(self.end_s - self.start_s, 3)
@@ -68,6 +71,16 @@ class Deadlock:
             "cleared_after_s": dur,
             "resolved_by": self.resolved_by,
             "cause": self.cause,
+            "pose": None
+            if self.pose is None
+            else [
+                round(self.pose[0], 3),
+                round(self.pose[1], 3),
+                round(np.degrees(self.pose[2]), 1),
+            ],
+            "goal_distance_m": None
+            if self.goal_distance_m is None
+            else round(self.goal_distance_m, 3),
         }
 
 
@@ -219,6 +232,8 @@ class MetricsRecorder:
             if dl is None:
                 dl = Deadlock(self.ids[i], float(self._best_t[i]))
                 dl.cause = None if self.explain is None else self.explain(i)
+                dl.pose = tuple(float(v) for v in poses[i, :3])
+                dl.goal_distance_m = float(pos_err[i])
                 self._deadlock[i] = dl
                 self.deadlocks.append(dl)
             else:

@@ -5,7 +5,8 @@ and the run's result JSON flattened (nested mappings joined with dots; lists and
 per-robot mappings kept as JSON text, with counts beside them). The summary gives, overall,
 per kind and per value of every swept parameter: jobs, errors, success rate (an errored job
 counts as not parked), runs with a collision, time-to-park over the lower bound (median and
-90th percentile of the parked runs) and deadlocks.
+90th percentile of the parked runs) and deadlocks, and how many of those were reported within
+:data:`PARKING_M` of the skid's goal (parking: the rest held it up on its way).
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ __all__ = ["flatten_result", "records_table", "summarize", "write_report", "prin
 #: Result entries kept whole as JSON text (one entry per robot: not columns).
 _AS_JSON = ("robots", "path_length_m", "expect")
 _COUNTED = ("collisions", "deadlocks", "recoveries", "expect_failures", "commands")
+#: A deadlock reported this close to the skid's goal is one of parking (the path follower's
+#: final approach, ``follower.approach_m``); farther off, the skid was held up on its way.
+PARKING_M = 2.0
 
 
 def flatten_result(result: dict | None, prefix: str = "") -> dict:
@@ -66,6 +70,13 @@ def _row(rec: dict) -> dict:
         row["n_parked"] = sum(bool(r.get("parked")) for r in robots)
         tp, lb = res.get("time_to_park_s"), res.get("lower_bound_s")
         row["time_over_bound"] = tp / lb if tp is not None and lb else None
+        dls = res.get("deadlocks") or []
+        far = [d.get("goal_distance_m") for d in dls]
+        # Episodes reported within PARKING_M of the goal (parking) rather than on the way;
+        # None for results from before deadlocks carried their distance.
+        row["n_deadlocks_parking"] = (
+            None if any(f is None for f in far) else sum(f <= PARKING_M for f in far)
+        )
     return row
 
 
@@ -89,6 +100,7 @@ def _group_stats(g: pd.DataFrame) -> dict:
     ratio = g.loc[g["parked"], "time_over_bound"].dropna() if "time_over_bound" in g else []
     coll = ok["n_collisions"] if "n_collisions" in ok else pd.Series(dtype=float)
     dead = ok["n_deadlocks"] if "n_deadlocks" in ok else pd.Series(dtype=float)
+    parking = ok["n_deadlocks_parking"] if "n_deadlocks_parking" in ok else pd.Series(dtype=float)
     return {
         "jobs": len(g),
         "errors": int(g["error"].notna().sum()),
@@ -98,6 +110,8 @@ def _group_stats(g: pd.DataFrame) -> dict:
         "ratio_p50": float(np.median(ratio)) if len(ratio) else None,
         "ratio_p90": float(np.percentile(ratio, 90)) if len(ratio) else None,
         "deadlocks": int(dead.sum()),
+        # Of those, reported within PARKING_M of the goal (None if a result lacks it).
+        "deadlocks_parking": int(parking.sum()) if len(parking) and parking.notna().all() else None,
         "wall_s_mean": float(g["wall_s"].mean()),
     }
 
