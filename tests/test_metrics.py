@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from helpers import Scripted, make_world
 
+from swarmpark.apps.cli import _print_table
 from swarmpark.apps.run import run_world
 from swarmpark.metrics import lower_bound_s
 
@@ -51,7 +52,7 @@ def test_clearance_to_wall_by_hand():
     assert out.result["min_clearance_m"] == pytest.approx(0.3, abs=1e-9)
 
 
-def test_deadlock_is_reported_when_pushing_into_a_wall():
+def test_deadlock_is_reported_when_pushing_into_a_wall(capsys):
     world = make_world(
         duration_s=25,
         map={
@@ -75,6 +76,10 @@ def test_deadlock_is_reported_when_pushing_into_a_wall():
     # Where it stood when reported: against the wall, 3.6 m short of its goal.
     assert dl["pose"][0] == pytest.approx(3.4, abs=0.05) and dl["pose"][2] == pytest.approx(0)
     assert dl["goal_distance_m"] == pytest.approx(3.6, abs=0.05)
+    # The run's table says so too.
+    _print_table(r)
+    (line,) = [s for s in capsys.readouterr().out.splitlines() if s.startswith("deadlock a ")]
+    assert line.endswith("s to the end at (3.40, 3.00), 3.60 m from its goal: no progress")
 
 
 def test_deadlock_names_its_cause_from_the_navigator():

@@ -60,6 +60,15 @@ def _print_table(result: dict) -> None:
         )
     for c in r["collisions"]:
         lines.append(f"collision at {c['t_s']:.2f} s: {c['a']} - {c['b']} ({c['kind']})")
+    for d in r["deadlocks"]:
+        end = "the end" if d["end_s"] is None else f"{d['end_s']:.2f} s"
+        where = ""
+        if d.get("pose") is not None:
+            x, y, _ = d["pose"]
+            where = f" at ({x:.2f}, {y:.2f}), {d['goal_distance_m']:.2f} m from its goal"
+        lines.append(
+            f"deadlock {d['robot']} {d['start_s']:.2f} s to {end}{where}: {d.get('cause') or '-'}"
+        )
     for c in r["commands"]:
         if not c["accepted"]:
             lines.append(f"refused {c['command']} at {c['t_s']:.2f} s: {c['reason']}")
