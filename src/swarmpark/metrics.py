@@ -71,17 +71,20 @@ class Deadlock:
             "cleared_after_s": dur,
             "resolved_by": self.resolved_by,
             "cause": self.cause,
-            "pose": None
-            if self.pose is None
-            else [
-                round(self.pose[0], 3),
-                round(self.pose[1], 3),
-                round(np.degrees(self.pose[2]), 1),
-            ],
+            "pose": None if self.pose is None else _pose_deg(self.pose),
             "goal_distance_m": None
             if self.goal_distance_m is None
             else round(self.goal_distance_m, 3),
         }
+
+
+def _pose_deg(pose) -> list[float]:
+    """A pose (x, y in m, heading in rad) as the run result gives it: heading in degrees."""
+    return [
+        round(float(pose[0]), 4),
+        round(float(pose[1]), 4),
+        round(float(np.rad2deg(pose[2])), 3),
+    ]
 
 
 def goal_errors(poses: np.ndarray, goals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -230,10 +233,13 @@ class MetricsRecorder:
         for i in np.flatnonzero(starts | ends).tolist():
             dl = self._deadlock[i]
             if dl is None:
-                dl = Deadlock(self.ids[i], float(self._best_t[i]))
-                dl.cause = None if self.explain is None else self.explain(i)
-                dl.pose = tuple(float(v) for v in poses[i, :3])
-                dl.goal_distance_m = float(pos_err[i])
+                dl = Deadlock(
+                    self.ids[i],
+                    float(self._best_t[i]),
+                    cause=None if self.explain is None else self.explain(i),
+                    pose=tuple(float(v) for v in poses[i, :3]),
+                    goal_distance_m=float(pos_err[i]),
+                )
                 self._deadlock[i] = dl
                 self.deadlocks.append(dl)
             else:
@@ -286,11 +292,7 @@ class MetricsRecorder:
                 "final_heading_error_deg": round(float(np.rad2deg(head_err[i])), 3)
                 if has_goal[i]
                 else None,
-                "final_pose": [
-                    round(float(poses[i, 0]), 4),
-                    round(float(poses[i, 1]), 4),
-                    round(float(np.rad2deg(poses[i, 2])), 3),
-                ],
+                "final_pose": _pose_deg(poses[i]),
             }
         ticks = np.asarray(self.tick_ms) if self.tick_ms else np.zeros(1)
         return {

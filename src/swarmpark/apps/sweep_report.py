@@ -17,14 +17,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from swarmpark.control.nav.params import FollowerParams
+
 __all__ = ["flatten_result", "records_table", "summarize", "write_report", "print_summary"]
 
 #: Result entries kept whole as JSON text (one entry per robot: not columns).
 _AS_JSON = ("robots", "path_length_m", "expect")
 _COUNTED = ("collisions", "deadlocks", "recoveries", "expect_failures", "commands")
 #: A deadlock reported this close to the skid's goal is one of parking (the path follower's
-#: final approach, ``follower.approach_m``); farther off, the skid was held up on its way.
-PARKING_M = 2.0
+#: final approach); farther off, the skid was held up on its way.
+PARKING_M = FollowerParams().approach_m
 
 
 def flatten_result(result: dict | None, prefix: str = "") -> dict:
