@@ -58,6 +58,22 @@ def test_a_stuck_skid_manoeuvres_into_its_spot():
     assert abs(np.angle(np.exp(1j * (view.poses[0, 2] - GOAL[2])))) < np.deg2rad(3.0)
 
 
+def test_a_skid_stuck_near_its_goal_manoeuvres_sooner():
+    # 1.8 m from its goal (within near_goal_m) beside the pillar: parking, not travelling.
+    p = ManoeuvreParams()
+    start = np.array([6.2, 1.5, np.pi / 2])
+    assert np.hypot(*(start[:2] - GOAL[:2])) < p.near_goal_m
+    view, st, trace = _drive(p, start)
+    started = [t for t, running in trace if running]
+    assert started and p.near_stuck_s - 1e-9 <= started[0] < p.stuck_s
+    err = np.hypot(*(view.poses[0, :2] - GOAL[:2]))
+    assert err < 0.06
+    # With near_goal_m 0 the same skid waits stuck_s, as one on its way.
+    _, _, trace = _drive(ManoeuvreParams(near_goal_m=0.0), start, steps=300)
+    started = [t for t, running in trace if running]
+    assert started and started[0] >= p.stuck_s - 1e-9
+
+
 def test_a_manoeuvre_ends_when_the_skid_is_no_longer_eligible():
     p = ManoeuvreParams(stuck_s=0.5)
     planner, states, view, idx = _running(p)

@@ -84,14 +84,18 @@ class ManoeuvrePlanner:
         settled: np.ndarray | None = None,
     ) -> np.ndarray:
         """Replace the commands ``raw`` (rows of ``idx``) of the skids in a manoeuvre; start
-        one for an ``eligible`` skid that made no progress for ``stuck_s``. Returns which rows
+        one for an ``eligible`` skid that made no progress for ``stuck_s`` (``near_stuck_s``
+        within ``near_goal_m`` of its goal). Returns which rows
         are manoeuvring. ``settled`` ``(N,)``: the skids that could make room; a skid for which
         no manoeuvre is found but one is without them is marked walled in."""
         p = self.params
         out = np.zeros(len(idx), dtype=bool)
         pose, goal = view.poses[idx], view.goals[idx]
+        dist = np.linalg.norm(goal[:, :2] - pose[:, :2], axis=1)
+        # Parking (near the goal) a skid waits near_stuck_s, on its way stuck_s.
+        wait_s = np.where(dist <= p.near_goal_m, p.near_stuck_s, p.stuck_s).tolist()
         left = remaining_m(
-            np.linalg.norm(goal[:, :2] - pose[:, :2], axis=1),
+            dist,
             np.abs(wrap_angle(goal[:, 2] - pose[:, 2])),
             NAV_HEADING_LEVER_M,
         )
@@ -112,7 +116,7 @@ class ManoeuvrePlanner:
                 st.best_left_m, st.best_t = left[k], view.t
                 st.anchor = pose[k, :2].copy()
             if not st.running():
-                if view.t - st.best_t < p.stuck_s or view.t < st.retry_t:
+                if view.t - st.best_t < wait_s[k] or view.t < st.retry_t:
                     continue
                 self._start(view, i, st, settled)
                 if not st.running():

@@ -171,6 +171,11 @@ class ManoeuvreParams:
     #: plan repair has had its chance; 8 s made the suite's elevator slower, 74.7 -> 100 s).
     stuck_s: float = 12.0
     progress_m: float = 0.15
+    #: Within ``near_goal_m`` of its goal (parking, where no plan repair helps) it plans one
+    #: after ``near_stuck_s`` already (training draws: 7.6 % faster on the runs parked
+    #: either way, 247 deadlock episodes against 260).
+    near_goal_m: float = 2.0
+    near_stuck_s: float = 5.0
     #: ... and has stayed within this distance of where it last got closer (a skid driving
     #: round an obstacle, away from its goal, is not stuck).
     roam_m: float = 1.0
@@ -216,6 +221,7 @@ class ManoeuvreParams:
 
     def __post_init__(self) -> None:
         _check(self, {"stuck_s": ">0", "progress_m": ">0", "window_margin_m": ">0"})
+        _check(self, {"near_goal_m": ">=0", "near_stuck_s": ">0"})
         _check(self, {"roam_m": ">0", "escape_step_m": ">0", "escape_max_m": ">=0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
         _check(
