@@ -85,9 +85,9 @@ class ManoeuvrePlanner:
     ) -> np.ndarray:
         """Replace the commands ``raw`` (rows of ``idx``) of the skids in a manoeuvre; start
         one for an ``eligible`` skid that made no progress for ``stuck_s`` (``near_stuck_s``
-        within ``near_goal_m`` of its goal). Returns which rows
-        are manoeuvring. ``settled`` ``(N,)``: the skids that could make room; a skid for which
-        no manoeuvre is found but one is without them is marked walled in."""
+        within ``near_goal_m`` of its goal). Returns which rows are manoeuvring. ``settled``
+        ``(N,)``: the skids that could make room; a skid for which no manoeuvre is found but
+        one is without them is marked walled in."""
         p = self.params
         out = np.zeros(len(idx), dtype=bool)
         pose, goal = view.poses[idx], view.goals[idx]
