@@ -199,3 +199,24 @@ def test_two_skids_turning_towards_each_other_keep_the_margin():
         gap = min(gap, Polygon(a).distance(Polygon(b)))
     assert gap >= 0.9 * MonitorParams().margin_m
     assert moved > 0.1  # not both frozen
+
+
+def test_two_skids_closing_head_on_are_checked_together_before_they_are_within_reach():
+    """Two skids drive head-on at each other at full speed, 0.8 m apart: each is safe against
+    the other standing (it covers 0.5 m in the 1 s horizon), together they close 1 m. Their
+    pivots are 2 m apart, beyond the reach of their corners (1.5 m), so the pair check must
+    look as far as both travel over the horizon, or they come into it too late to brake."""
+    poses = [[3.0, 3.0, 0.0], [5.0, 3.0, np.pi]]
+    goals = [[4.0, 3.0, 0.0], [9.0, 3.0, np.pi]]  # the first skid is nearer its goal
+    raw = np.array([[0.5, 0.0], [0.5, 0.0]])
+    view = make_view(poses, goals, vel=raw, dt=0.05)
+    plain = np.stack([fp.corners_body() for fp in view.footprints])
+    a, b = footprint_corners(view.poses, plain)
+    assert Polygon(a).distance(Polygon(b)) == pytest.approx(0.8)
+    assert _joint_gap(view, raw, steps=20) == 0.0  # the commands as asked touch within 1 s
+    for i in range(2):  # each is left at full speed with the other standing
+        one = raw * (np.arange(2) == i)[:, None]
+        assert np.array_equal(_check(view, one).commands, one)
+    res = _check(view, raw)
+    assert np.array_equal(res.commands[0], raw[0])  # the skid of higher rank goes on
+    assert np.array_equal(res.commands[1], [0.0, 0.0]) and res.blockers[1] == {0}
