@@ -29,8 +29,8 @@ def test_map_command_writes_a_map_that_agrees_with_the_hangar(tmp_path, capsys):
     np.testing.assert_array_equal(grid.unknown, committed.unknown)
     agree = summary["map_agreement"]
     # Measured (the loop and the two legs through the middle): every observed cell right, all
-    # the observable cells observed, wall precision 0.99 and recall 1.00; after the loop
-    # closures the keyframes are at most 0.10 m off while the odometry drifts 1.9 m (without
+    # the observable cells observed, wall precision 1.00 and recall 1.00; after the loop
+    # closures the keyframes are at most 0.06 m off while the odometry drifts 2.0 m (without
     # loop closure: 0.33 m, recall 0.97; before keyframes: wall precision 0.63 on the loop).
     assert agree["share_correct"] > 0.99
     assert agree["share_observed"] > 0.95
@@ -40,14 +40,14 @@ def test_map_command_writes_a_map_that_agrees_with_the_hangar(tmp_path, capsys):
     assert summary["slam_error_final_m"] < 0.05
     assert summary["odometry_drift_final_m"] > 0.5  # there was drift to remove
     assert summary["scans"] > 1000
-    # The route comes back to places it mapped: the pose graph finds the loop closures (89)
-    # and is optimized when they show drift (5 times); the facing gate refuses the racks'
-    # opposite faces.
+    # The route comes back to places it mapped: the pose graph finds the loop closures (46)
+    # and is optimized when they show drift (3 times). (The drive since 2026-12-04 brings no
+    # candidate that pairs the racks' opposite faces; the facing gate that refuses those is
+    # tested on a rack of its own, tests/test_slam.py.)
     graph = summary["pose_graph"]
     assert graph["keyframes"] == summary["keyframes"] > 200
     assert graph["loop_closures"] > 20
     assert graph["optimizations"] >= 1
-    assert graph["loop_candidates_rejected"].get("opposite faces", 0) >= 1
 
 
 @pytest.mark.slow

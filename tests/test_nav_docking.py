@@ -46,9 +46,38 @@ def test_drives_along_the_goal_axis_towards_the_goal(x, sign):
     cmd = h.step(make_view([[x, 3.0, 0.0]], [GOAL]))
     assert np.sign(cmd[0, 0]) == sign
     assert cmd[0, 1] == pytest.approx(0.0, abs=1e-9)
-    # Bounded by the docking share of the top speed.
-    assert abs(cmd[0, 0]) <= DockingParams().max_speed_share * 0.5 + 1e-12
+    # On its line: up to the aligned share of the top speed (0.5 m/s in the views).
+    p = DockingParams()
+    assert 0.5 * p.max_speed_share < abs(cmd[0, 0]) <= p.aligned_speed_share * 0.5 + 1e-12
     assert h.docks[0].phase == "approach"
+
+
+def test_off_its_line_a_skid_docks_at_the_docking_share():
+    # As far off the axis as aligned_lateral_m (and 20 deg off the heading): the precise
+    # manoeuvre's cap, half the top speed.
+    p = DockingParams()
+    h = Harness()
+    cmd = h.step(make_view([[4.0, 3.0 + p.aligned_lateral_m, np.deg2rad(-20.0)]], [GOAL]))
+    assert 0.0 < cmd[0, 0] <= p.max_speed_share * 0.5 + 1e-12
+
+
+@pytest.mark.parametrize("brake_share", [0.5, 0.0])
+def test_docking_brakes_onto_the_goal(brake_share):
+    # From 1 m out on the axis: docked inside the parked band; braking at half the
+    # acceleration limit gets there sooner than the proportional law (brake_share 0).
+    p = DockingParams(brake_share=brake_share)
+    h = Harness()
+    h.dock.params = p
+    view = make_view([[4.0, 3.0, 0.0]], [GOAL], dt=0.05)
+    for _ in range(400):
+        cmd = h.step(view)
+        if h.docks[0].docked:
+            break
+        view = advance(view, cmd)
+    assert h.docks[0].docked
+    assert abs(view.poses[0, 0] - GOAL[0]) < p.parked_pos_m
+    # (2.15 s against 3.6 s: the proportional law creeps the last decimetres.)
+    assert view.t < 3.0 if brake_share else view.t > 3.0
 
 
 def test_steers_back_onto_the_axis():

@@ -23,38 +23,60 @@ def test_station_and_point_at_walk_the_polyline():
     assert pt == pytest.approx([5.0, 5.0])
 
 
-def _follow(pose, path=PATH, reverse=False, lookahead=None):
-    view = make_view([pose], [[5.0, 5.0, np.pi / 2]])
+def _follow(pose, path=PATH, reverse=False, lookahead=None, goal_yaw=0.0):
+    """Targets on ``PATH``; with the goal heading 0 its last segment is no run along the goal's
+    axis (``np.pi / 2``: it is, and the path turns onto it at (5, 3) by 90 deg)."""
+    view = make_view([pose], [[5.0, 5.0, goal_yaw]])
     states = [PathState(path=path, reverse=reverse)]
     return PathFollower(FollowerParams()).targets(view, np.array([0]), states, lookahead)
 
 
 def test_target_is_the_lookahead_point_on_the_path():
-    targets, final = _follow([2.0, 3.2, 0.0])
+    targets, final, stage_left = _follow([2.0, 3.2, 0.0])
     la = FollowerParams().lookahead_m
-    assert not final[0]
+    assert not final[0] and stage_left[0] == np.inf
     assert targets[0] == pytest.approx([2.0 + la, 3.0, 0.0])
     # Round the corner: the target is on the next segment, heading along it.
-    targets, _ = _follow([4.0, 3.0, 0.0])
+    targets, _, _ = _follow([4.0, 3.0, 0.0])
     assert targets[0] == pytest.approx([5.0, 3.0 + (4.0 - 1.0) + la - 4.0, np.pi / 2])
     # A longer lookahead (RVO's) reaches farther.
-    targets, _ = _follow([1.5, 3.0, 0.0], lookahead=3.0)
+    targets, _, _ = _follow([1.5, 3.0, 0.0], lookahead=3.0)
     assert targets[0, :2] == pytest.approx([4.5, 3.0])
 
 
+def test_a_skid_drives_to_its_staging_point_before_turning_onto_the_axis():
+    # The last segment runs along the goal's axis and the path turns onto it by 90 deg at
+    # (5, 3): the target stays on the staging point, not round the corner, and the path left
+    # to it is reported (the navigator brakes on it) ...
+    targets, final, stage_left = _follow([4.0, 3.0, 0.0], goal_yaw=np.pi / 2)
+    assert not final[0] and stage_left[0] == pytest.approx(1.0)
+    assert targets[0] == pytest.approx([5.0, 3.0, 0.0])
+    # ... also within approach_m of the goal (2 m; the lookahead point short of the staging
+    # point), until within stage_reach_m of it.
+    targets, final, stage_left = _follow([3.5, 3.0, 0.0], goal_yaw=np.pi / 2)
+    assert not final[0] and stage_left[0] == pytest.approx(1.5)
+    assert targets[0] == pytest.approx([3.5 + FollowerParams().lookahead_m, 3.0, 0.0])
+    # Aiming at the staging point, straight at it from where the skid stands.
+    targets, _, _ = _follow([4.2, 3.3, 0.0], goal_yaw=np.pi / 2)
+    assert targets[0] == pytest.approx([5.0, 3.0, np.arctan2(-0.3, 0.8)])
+    targets, final, stage_left = _follow([5.0, 3.05, 0.0], goal_yaw=np.pi / 2)
+    assert final[0] and stage_left[0] == np.inf
+    assert targets[0] == pytest.approx([5.0, 5.0, np.pi / 2])
+
+
 def test_reverse_points_the_target_heading_backwards():
-    targets, _ = _follow([2.0, 3.0, np.pi], reverse=True)
+    targets, _, _ = _follow([2.0, 3.0, np.pi], reverse=True)
     assert abs(targets[0, 2]) == pytest.approx(np.pi)
 
 
 def test_final_approach_attracts_the_goal_itself():
     # 1.5 m of path left (< approach_m = 2 m): the target is the goal pose.
-    targets, final = _follow([5.0, 3.5, np.pi / 2])
+    targets, final, _ = _follow([5.0, 3.5, np.pi / 2])
     assert final[0]
-    assert targets[0] == pytest.approx([5.0, 5.0, np.pi / 2])
+    assert targets[0] == pytest.approx([5.0, 5.0, 0.0])
     # No path yet: the goal as well.
-    targets, final = _follow([2.0, 3.0, 0.0], path=None)
-    assert final[0] and targets[0] == pytest.approx([5.0, 5.0, np.pi / 2])
+    targets, final, _ = _follow([2.0, 3.0, 0.0], path=None)
+    assert final[0] and targets[0] == pytest.approx([5.0, 5.0, 0.0])
 
 
 @pytest.mark.parametrize(

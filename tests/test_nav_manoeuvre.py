@@ -26,7 +26,7 @@ def _drive(params, start, steps=900):
         raw = np.zeros((1, 2))
         planner.step(view, idx, raw, states, np.array([True]))
         cmd = np.vstack([raw, np.zeros((1, 2))])
-        trace.append((view.t, states[0].running()))
+        trace.append((view.t, states[0].running(), states[0].failed))
         view = advance(view, cmd)
     return view, states[0], trace
 
@@ -49,10 +49,12 @@ def _running(p):
 def test_a_stuck_skid_manoeuvres_into_its_spot():
     p = ManoeuvreParams()
     view, st, trace = _drive(p, np.array([6.5, 0.8, np.pi / 2]))
-    started = [t for t, running in trace if running]
+    started = [t for t, running, _ in trace if running]
     # Nothing happens before the skid has been without progress for stuck_s.
     assert started and started[0] >= p.stuck_s - 1e-9
-    assert st.planned >= 1 and st.failed == 0
+    # The first search found its way (later ones, from the spot itself, may find nothing
+    # left to do: here no docking takes over).
+    assert st.planned >= 1 and all(failed == 0 for t, _, failed in trace if t <= started[0])
     err = np.hypot(*(view.poses[0, :2] - GOAL[:2]))
     assert err < 0.06
     assert abs(np.angle(np.exp(1j * (view.poses[0, 2] - GOAL[2])))) < np.deg2rad(3.0)
@@ -64,13 +66,13 @@ def test_a_skid_stuck_near_its_goal_manoeuvres_sooner():
     start = np.array([6.2, 1.5, np.pi / 2])
     assert np.hypot(*(start[:2] - GOAL[:2])) < p.near_goal_m
     view, st, trace = _drive(p, start)
-    started = [t for t, running in trace if running]
+    started = [t for t, running, _ in trace if running]
     assert started and p.near_stuck_s - 1e-9 <= started[0] < p.stuck_s
     err = np.hypot(*(view.poses[0, :2] - GOAL[:2]))
     assert err < 0.06
     # With near_goal_m 0 the same skid waits stuck_s, as one on its way.
     _, _, trace = _drive(ManoeuvreParams(near_goal_m=0.0), start, steps=300)
-    started = [t for t, running in trace if running]
+    started = [t for t, running, _ in trace if running]
     assert started and started[0] >= p.stuck_s - 1e-9
 
 
@@ -129,3 +131,15 @@ def test_a_wedged_skid_first_backs_straight_out():
     assert segments and segments[0][0] == "reverse"
     out = segments[0][2]
     assert out[0] < 3.2 - 0.6 and abs(out[1] - 3.0) < 1e-9  # clear of the slot, same line
+
+
+def test_runs_and_turns_brake_onto_their_ends():
+    # The same manoeuvre driven with the braking profile and with the proportional law
+    # (brake_share 0): both end at the spot, braking 3 s sooner (17.8 s against 20.8 s).
+    ends = []
+    for share in (ManoeuvreParams().brake_share, 0.0):
+        view, _, trace = _drive(ManoeuvreParams(brake_share=share), np.array([6.5, 0.8, np.pi / 2]))
+        t0 = next(t for t, running, _ in trace if running)
+        ends.append(next(t for t, running, _ in trace if t > t0 and not running) - t0)
+        assert np.hypot(*(view.poses[0, :2] - GOAL[:2])) < 0.06
+    assert ends[0] < ends[1] - 2.0

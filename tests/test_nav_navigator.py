@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import shapely
 from navkit import advance, make_view
 from shapely.geometry import box
 
@@ -94,3 +95,19 @@ def test_held_skids_stop_outside_their_boundary_but_may_back_off():
     free = np.array([[0.5, 0.0]])
     hold_outside(replace(view, hold=np.array([False])), np.array([0]), free, HoldParams())
     assert free[0, 0] == 0.5
+
+
+def test_a_skid_held_outside_its_boundary_waits_without_backing_up():
+    # Held by the fill order 1.1 m short of its boundary for 6 s (three times the stall
+    # watch's time): it stops short and waits there; it does not back up as a stuck skid.
+    nav = Navigator()
+    zone = box(5.0, 0.0, 9.0, 6.0)
+    view = make_view([[3.3, 3.0, 0.0]], [[7.0, 3.0, 0.0]], goal_changed=[True], dt=0.05)
+    view = replace(view, hold=np.array([True]), hold_zones=(zone,))
+    speeds = []
+    for _ in range(120):
+        cmd = nav.compute(view)
+        speeds.append(cmd[0, 0])
+        view = advance(view, cmd, hold=np.array([True]), hold_zones=(zone,))
+    assert min(speeds) >= 0.0 and nav.robots[0].stall.stalled_s == 0.0
+    assert 0.0 < zone.exterior.distance(shapely.Point(view.poses[0, :2])) - 0.6 <= 1.1

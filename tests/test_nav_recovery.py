@@ -166,9 +166,14 @@ def test_give_way_backs_away_from_a_higher_rank_and_not_when_docking():
         priority=[2.0, 1.0],
         t=10.0,
     )
-    states = [GiveWayState(), GiveWayState(blockers={0}, blocked_s=1.0)]
     raw = np.array([[0.3, 0.0], [0.3, 0.0]])
     dist = np.array([4.0, 4.5])
+    # While skid 0 drives on unhindered, skid 1 waits for it to pass.
+    states = [GiveWayState(), GiveWayState(blockers={0}, blocked_s=1.0)]
+    out = gw.step(view, np.array([0, 1]), raw, dist, states, [False, False])
+    assert np.array_equal(out, raw) and states[1].until_s == -np.inf
+    # Skid 0 held up by skid 1 in turn: skid 1 backs away.
+    states = [GiveWayState(blockers={1}), GiveWayState(blockers={0}, blocked_s=1.0)]
     out = gw.step(view, np.array([0, 1]), raw, dist, states, [False, False])
     assert out[1, 0] == pytest.approx(-GiveWayParams().speed_share * 0.5)  # backs away
     assert np.array_equal(out[0], raw[0])

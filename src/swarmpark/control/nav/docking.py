@@ -176,13 +176,25 @@ class Docking:
         sgn = -to_goal if st.runup else to_goal
         if abs(e_long) < p.parked_pos_m and not st.runup:
             return self._turn(view, i, e_yaw)  # on the spot: only turn to the goal heading
-        aim = -sgn * np.arctan(p.k_lateral * e_lat)  # heading off the axis, goal frame
+        # Aim at the axis 1 / k_lateral ahead, or farther out at axis_ahead of the distance
+        # left (a skid 1.6 m out and 0.17 m off the axis turned 27 deg, nose into the jamb
+        # of the door beside its spot).
+        ahead = max(1.0 / p.k_lateral, p.axis_ahead * abs(e_long))
+        aim = -sgn * np.arctan(e_lat / ahead)  # heading off the axis, goal frame
         yaw_err = wrap_angle(aim + e_yaw)  # (goal + aim) - current heading
-        speed = np.clip(
-            p.k_dock * (p.runup_m if st.runup else abs(e_long)),
-            p.min_speed_mps,
-            p.max_speed_share * view.max_speed[i],
-        )
+        share = p.max_speed_share
+        if not st.runup:
+            on_line = max(1.0 - abs(e_lat) / p.aligned_lateral_m, 0.0)
+            on_line *= max(1.0 - abs(e_yaw) / p.aligned_yaw_rad, 0.0)
+            share += (p.aligned_speed_share - share) * on_line
+        if st.runup:
+            want = p.k_dock * p.runup_m
+        elif p.brake_share > 0 and view.max_accel is not None:
+            # Slow down as a skid braking at brake_share of its limit stops on the goal.
+            want = np.sqrt(2.0 * p.brake_share * view.max_accel[i] * abs(e_long))
+        else:
+            want = p.k_dock * abs(e_long)
+        speed = np.clip(want, p.min_speed_mps, share * view.max_speed[i])
         v = sgn * speed * max(np.cos(yaw_err), 0.0) ** 2
         w = np.clip(p.k_dock_yaw * yaw_err, -view.max_yaw_rate[i], view.max_yaw_rate[i])
         return (v, w)

@@ -246,32 +246,73 @@ class PathFollower:
         idx: np.ndarray,
         states: list[PathState],
         lookahead_m: float | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Temporary goal pose per robot (``lookahead_m`` ahead on its path, or its goal)
-        and whether it is in its final approach (within ``approach_m`` of the path's end).
-        All robots at once, on :class:`PackedPaths`."""
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Temporary goal pose per robot (``lookahead_m`` ahead on its path, or its goal),
+        whether it is in its final approach (within ``approach_m`` of the path's end) and the
+        path left to its staging point while it drives there first (``inf`` otherwise; see
+        :meth:`_staging`). All robots at once, on :class:`PackedPaths`."""
         p = self.params
         lookahead_m = p.lookahead_m if lookahead_m is None else lookahead_m
         targets = view.goals[idx].copy()
         final = np.ones(len(idx), dtype=bool)
+        stage_left = np.full(len(idx), np.inf)
         pk = self.packed
         pk.update(states)
         k = np.flatnonzero(pk.nseg[idx] > 0)
         if not len(k):
-            return targets, final
+            return targets, final, stage_left
         rows = idx[k]
         _, s_here = pk.project(rows, view.poses[rows, :2])
         end = pk.cum[rows, pk.nseg[rows]]
-        go = end - s_here > p.approach_m
+        stage_s = self._staging(view, rows)
+        staging = stage_s - s_here > p.stage_reach_m
+        go = (end - s_here > p.approach_m) | staging
+        stage_left[k[staging]] = (stage_s - s_here)[staging]
+        # Those not yet at their staging point aim no farther along the path than it.
+        end = np.where(staging, stage_s, end)
         k, rows, s_here, end = k[go], rows[go], s_here[go], end[go]
         final[k] = False
         pt, m = pk.point_at(rows, np.minimum(s_here + lookahead_m, end))
         seg = pk.seg[rows, m]
+        # Aiming at the staging point itself: straight at it (the skid turns there anyway;
+        # the path's heading into it made the field swing round and past it).
+        at_stage = staging[go] & (s_here + lookahead_m >= end)
+        seg[at_stage] = pt[at_stage] - view.poses[rows[at_stage], :2]
         back = np.array([states[i].reverse for i in rows], dtype=bool)
         heading = np.arctan2(seg[:, 1], seg[:, 0]) + np.where(back, np.pi, 0.0)
         targets[k, :2] = pt
         targets[k, 2] = wrap_angle(heading)
-        return targets, final
+        return targets, final, stage_left
+
+    def _staging(self, view: ControlView, rows: np.ndarray) -> np.ndarray:
+        """Arc length of each path's staging point where the skid must drive there before it
+        turns onto the goal's axis (``-inf`` elsewhere): the path's last segment is the run
+        along the goal's axis (:meth:`~.planner.Planner.plan`) and the path turns onto it by
+        more than ``stage_corner_rad``. Cutting that corner in the final approach, a skid came
+        to its spot from the side, turned on the spot 1 m off the axis and backed in on a
+        diagonal and ran up again (12 s where driving on, turning and backing in takes 7 s)."""
+        pk = self.packed
+        out = np.full(len(rows), -np.inf)
+        n = pk.nseg[rows]
+        ok = n >= 2
+        if not ok.any():
+            return out
+        last = pk.seg[rows, np.maximum(n - 1, 0)]
+        inc = pk.seg[rows, np.maximum(n - 2, 0)]
+        g = view.goals[rows, 2]
+        # The last segment lies on the goal's axis (either way).
+        on_axis = np.abs(last[:, 0] * np.sin(g) - last[:, 1] * np.cos(g)) <= 1e-6 * (
+            1.0 + np.hypot(last[:, 0], last[:, 1])
+        )
+        corner = np.abs(
+            np.arctan2(
+                inc[:, 0] * last[:, 1] - inc[:, 1] * last[:, 0],
+                inc[:, 0] * last[:, 0] + inc[:, 1] * last[:, 1],
+            )
+        )
+        sharp = ok & on_axis & (corner > self.params.stage_corner_rad)
+        out[sharp] = pk.cum[rows, np.maximum(n - 1, 0)][sharp]
+        return out
 
 
 def path_ahead(view: ControlView, i: int, state: PathState, length_m: float) -> np.ndarray:

@@ -33,12 +33,16 @@ def stop_short(
     return True
 
 
-def hold_outside(view: ControlView, idx: np.ndarray, cmd: np.ndarray, p: HoldParams) -> None:
+def hold_outside(view: ControlView, idx: np.ndarray, cmd: np.ndarray, p: HoldParams) -> np.ndarray:
     """Stop (in place on ``cmd``) the held skids among ``idx`` whose command, held for
-    ``lookahead_s``, would bring them within ``gap_m`` of their parking boundary."""
+    ``lookahead_s``, would bring them within ``gap_m`` of their parking boundary. Returns
+    which of ``idx`` are held outside (waiting, whether stopped this tick or not)."""
+    held = np.zeros(len(idx), dtype=bool)
     if view.hold is None or not view.hold[idx].any():
-        return
-    for i in idx[view.hold[idx]]:
+        return held
+    for k in np.flatnonzero(view.hold[idx]).tolist():
+        i = int(idx[k])
         zone = view.hold_zones[i] if i < len(view.hold_zones) else None
         if zone is not None:
-            stop_short(view, i, cmd, zone, p.gap_m, p.lookahead_s)
+            held[k] = stop_short(view, i, cmd, zone, p.gap_m, p.lookahead_s)
+    return held

@@ -261,6 +261,21 @@ class ManoeuvrePlanner:
 
     # ------------------------------------------------------------------ driving
 
+    def _stop_rate(self, left: float, view: ControlView, i: int, *, yaw: bool = False) -> float:
+        """The speed (or yaw rate) from which skid ``i`` stops in ``left`` metres (radians)
+        braking at ``brake_share`` of its acceleration limit: ``sqrt(2 a left)``. Without
+        acceleration limits or with ``brake_share`` 0, the proportional law ``k_speed *
+        left`` (``k_yaw``)."""
+        p = self.params
+        if yaw:
+            acc = None if view.max_yaw_accel is None else float(view.max_yaw_accel[i])
+            k = p.k_yaw
+        else:
+            acc, k = float(view.max_accel[i]), p.k_speed
+        if acc is None or not np.isfinite(acc) or p.brake_share <= 0:
+            return k * left
+        return float(np.sqrt(2.0 * p.brake_share * acc * left))
+
     def _drive(self, view: ControlView, i: int, st: ManoeuvreState) -> np.ndarray | None:
         """The command along the current segment; moves to the next one when it is done and
         ends the manoeuvre after the last (None: ended, the docking manoeuvre takes over)."""
@@ -284,9 +299,8 @@ class ManoeuvrePlanner:
             if kind == "turn":
                 err = wrap_angle(b[2] - pose[2])
                 if abs(err) > p.done_rad:
-                    w = np.clip(p.k_yaw * err, -w_max, w_max)
-                    w = np.sign(w) * max(abs(w), p.min_yaw_rate_radps)
-                    return np.array([0.0, w])
+                    w = min(self._stop_rate(abs(err), view, i, yaw=True), w_max)
+                    return np.array([0.0, np.sign(err) * max(w, p.min_yaw_rate_radps)])
             else:
                 d = 1.0 if kind == "forward" else -1.0
                 u = np.array([np.cos(b[2]), np.sin(b[2])])
@@ -296,7 +310,7 @@ class ManoeuvrePlanner:
                     lateral = float(u[0] * rel[1] - u[1] * rel[0])  # left of the run: > 0
                     aim = b[2] - d * np.arctan(p.k_lateral * lateral)
                     err = wrap_angle(aim - pose[2])
-                    speed = np.clip(p.k_speed * along, p.min_speed_mps, v_max)
+                    speed = np.clip(self._stop_rate(along, view, i), p.min_speed_mps, v_max)
                     speed *= max(np.cos(err), 0.0)
                     return np.array([d * speed, np.clip(p.k_yaw * err, -w_max, w_max)])
             st.seg += 1

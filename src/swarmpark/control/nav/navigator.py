@@ -164,7 +164,7 @@ class Navigator:
             self._cut_off(view)
         fleet = self._fleet(view)
         self.planner.update(view, paths, self.follower, fleet if p.fleet_map.enabled else None)
-        targets, final = self.follower.targets(view, idx, paths)
+        targets, final, stage_left = self.follower.targets(view, idx, paths)
         # Skids whose path is for an older goal (queued for planning) hold still meanwhile.
         waiting = self.follower.waiting(view, idx, paths)
         reverse = self.follower.update_ends(view, idx, final, paths)
@@ -172,10 +172,25 @@ class Navigator:
         docked_now = np.array([r.dock.docked for r in self.robots], dtype=bool)
         if p.avoidance != "rvo":
             targets = self._keep_right(view, idx, targets, final | waiting, fleet, docked_now)
+        # On the way to a staging point a skid is parking already: as in its final approach,
+        # only obstacles very near push it (the walls beside its spot held one still 1.3 m
+        # from it, in a local minimum of the field).
+        staging = np.isfinite(stage_left)
         raw, dist_goal = self.field.drive(
-            self.people.field_view(view), idx, scene, targets, reverse, final, p.follower.approach_m
+            self.people.field_view(view),
+            idx,
+            scene,
+            targets,
+            reverse,
+            final | staging,
+            p.follower.approach_m,
         )
         raw[waiting] = 0.0
+        # On the way to a staging point to turn there: brake to stop on it.
+        if staging.any():
+            share = p.follower.stage_brake_share
+            cap = np.sqrt(2.0 * share * view.max_accel[idx[staging]] * stage_left[staging])
+            raw[staging, 0] = np.clip(raw[staging, 0], -cap, cap)
         # A skid stuck for a while drives a planned manoeuvre instead (not docked, not held
         # back by the fill order or queued at a door: fleet.waiting).
         docked = docked_now[idx]
@@ -204,7 +219,7 @@ class Navigator:
             full = np.zeros((n, 2))
             full[idx] = raw
             cruising = ~final & ~waiting & ~man
-            aims, _ = self.follower.targets(view, idx[cruising], paths, p.rvo.lookahead_m)
+            aims, _, _ = self.follower.targets(view, idx[cruising], paths, p.rvo.lookahead_m)
             full = self._avoid(view, full, idx[cruising], aims)
             moving = np.flatnonzero(np.any(np.abs(full) > 0, axis=1) | view.active)
             full[moving], aside = self._yield(view, moving, full[moving])
@@ -224,16 +239,24 @@ class Navigator:
             full[idx] = raw
             self._guard_aside(view, idx[aside], full, cmd)
         self.manoeuvre.observe(view, idx, man_states, raw, cmd[idx])
-        hold_outside(view, idx, cmd, p.hold)
+        held = hold_outside(view, idx, cmd, p.hold)
         self.queued = np.zeros(n, dtype=bool)
         if p.traffic.enabled:
             self.queued[idx] = self.traffic.step(
                 view, idx, cmd, paths, self.follower, self._states("traffic"), fleet.parked
             )
-        # How long the monitor or the field has kept each skid (nearly) still.
+        # How long the monitor or the field has kept each skid (nearly) still. A skid waiting
+        # outside its boundary for the fill order or at a door for its turn is not stuck: it
+        # does not back up (it backed 0.5 m out of the queue and drove back, 4-5 s lost each
+        # time, on a generated elevator site).
         robots = [self.robots[i] for i in idx]
+        paused = (held | self.queued[idx]).tolist()
         StallWatch.update_all(
-            p.stall, [r.stall for r in robots], cmd[idx], [r.dock.docked for r in robots], view.dt
+            p.stall,
+            [r.stall for r in robots],
+            cmd[idx],
+            [r.dock.docked or w for r, w in zip(robots, paused, strict=True)],
+            view.dt,
         )
         return cmd
 

@@ -82,9 +82,18 @@ class FollowerParams:
     #: A fresh path is driven in reverse when the skid faces more than this away from its
     #: first stretch (below it turning in place to drive forwards is cheaper).
     face_away_rad: float = float(np.deg2rad(120.0))
+    #: A path that turns onto the goal's axis at its staging point by more than this is
+    #: driven to the staging point first (its final approach starts within
+    #: ``stage_reach_m`` of it), braking there at ``stage_brake_share`` of the acceleration
+    #: limit; a gentler corner is left to the docking law from ``approach_m`` out.
+    stage_corner_rad: float = float(np.deg2rad(45.0))
+    stage_reach_m: float = 0.25
+    stage_brake_share: float = 0.5
 
     def __post_init__(self) -> None:
         _check(self, {"lookahead_m": ">0", "approach_m": ">0", "switch_ratio": "share"})
+        _check(self, {"stage_corner_rad": ">=0", "stage_reach_m": ">=0"})
+        _check(self, {"stage_brake_share": "share"})
         if not (_is_number(self.face_away_rad) and 0 <= self.face_away_rad <= np.pi):
             raise ValueError(
                 f"FollowerParams.face_away_rad must be in [0, pi] (got {self.face_away_rad!r})"
@@ -214,6 +223,12 @@ class ManoeuvreParams:
     #: a skid of a plain 6-skid room park 0.35 m off its spot and one 32.6 s late against
     #: 16.3 s (``tests/data/ros2-open.yaml``), so half speed stays.
     speed_share: float = 0.5
+    #: Each run and turn slows down as a skid braking at this share of its acceleration
+    #: limit stops at its end (``sqrt(2 a d)``: the monitor's speed scales slow it where that
+    #: rollout would overrun into something). The proportional law (``k_speed``, ``k_yaw``,
+    #: 1/s) crept the last tenth of a metre or the last few degrees at ``min_speed_mps`` and
+    #: ``min_yaw_rate_radps``: a 1.3 m manoeuvre took 10 s. 0: the proportional law.
+    brake_share: float = 0.5
     k_speed: float = 0.9
     k_yaw: float = 0.9
     k_lateral: float = 3.0
@@ -231,6 +246,7 @@ class ManoeuvreParams:
             self, {"grow_m": ">=0", "roomy_grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"}
         )
         _check(self, {"blocked_s": ">0", "retry_s": ">=0", "speed_share": "share"})
+        _check(self, {"brake_share": "share"})
         _check(self, {"k_speed": ">0", "k_yaw": ">0", "k_lateral": ">0"})
         _check(self, {"min_speed_mps": ">0", "min_yaw_rate_radps": ">0", "done_m": ">0"})
         _check(self, {"done_rad": ">0", "timeout_factor": ">0", "timeout_s": ">=0"})
@@ -313,8 +329,12 @@ class DockingParams:
     dock_radius_m: float = 0.3
     #: Largest lateral error that can still be closed by driving straight in.
     dock_lateral_m: float = 0.07
-    #: Gain of the goal-axis tracking law (rad of aim per m of lateral error, via atan).
+    #: Gain of the goal-axis tracking law (rad of aim per m of lateral error, via atan) ...
     k_lateral: float = 3.0
+    #: ... farther out at most ``1 / (axis_ahead * distance left)``: the skid aims at the axis
+    #: that share of the way to the goal ahead (a Stanley law with a lookahead, as pure
+    #: pursuit's), so it closes the lateral error over the approach, not in the first metre.
+    axis_ahead: float = 0.5
     #: Otherwise back out to this run-up distance along the goal heading and come in again;
     #: the planner also stages the path this far before the goal.
     runup_m: float = 0.9
@@ -341,9 +361,23 @@ class DockingParams:
     #: and walled-in runs (see :class:`ManoeuvreParams`' ``speed_share``).
     min_speed_mps: float = 0.06
     max_speed_share: float = 0.5
+    #: A skid already on the goal's axis and heading drives in at up to this share instead
+    #: (a straight run on a line it holds is no precise manoeuvre): the cap rises from
+    #: ``max_speed_share`` to this as the lateral error falls from ``aligned_lateral_m`` to 0
+    #: and the heading error from ``aligned_yaw_rad`` to 0 (the product of the two shares).
+    #: A run-up backs out at ``max_speed_share``.
+    aligned_speed_share: float = 1.0
+    aligned_lateral_m: float = 0.3
+    aligned_yaw_rad: float = float(np.deg2rad(30.0))
+    #: Closing in, the speed falls as a skid braking at this share of its acceleration limit
+    #: stops on the goal (``sqrt(2 a d)``; 0: the proportional ``k_dock`` law, which took
+    #: 2.3 s for the last 0.3 m at any speed).
+    brake_share: float = 0.5
 
     def __post_init__(self) -> None:
         _check(self, {"dock_radius_m": ">0", "dock_lateral_m": ">0", "k_lateral": ">0"})
+        _check(self, {"aligned_speed_share": "share", "aligned_lateral_m": ">0"})
+        _check(self, {"aligned_yaw_rad": ">0", "brake_share": "share", "axis_ahead": ">=0"})
         _check(self, {"runup_m": ">0", "runup_done_lateral_m": ">0", "runup_min_back_m": ">=0"})
         _check(self, {"parked_pos_m": ">0", "parked_yaw_rad": ">0", "k_dock": ">0"})
         _check(self, {"k_dock_yaw": ">0", "min_speed_mps": ">0", "max_speed_share": "share"})

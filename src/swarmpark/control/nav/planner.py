@@ -18,7 +18,7 @@ from swarmpark.control.nav.params import FleetMapParams, PlannerParams
 from swarmpark.core.geometry import Footprint
 from swarmpark.plan.grid import Costmap, build_costmap, path_length, paths_from, shortcut
 
-__all__ = ["Planner"]
+__all__ = ["Planner", "run_clear"]
 
 
 class Planner:
@@ -131,9 +131,11 @@ class Planner:
                 bound = fleet.bound if i in stuck else np.zeros_like(fleet.bound)
                 extra = run_extra(view, i, parked, bound, self.fleet_params)
                 with fleet_layers(cm, view, i, parked, bound, self.fleet_params) as fcm:
-                    path = self.plan(fcm, view.poses[i], goal, extra, work=work)
+                    path = self.plan(
+                        fcm, view.poses[i], goal, extra, work=work, footprint=view.footprints[i]
+                    )
             if path is None:  # no way around the fleet: the static map's (avoidance copes)
-                path = self.plan(cm, view.poses[i], goal, work=work)
+                path = self.plan(cm, view.poses[i], goal, work=work, footprint=view.footprints[i])
             st.path, st.path_goal, st.planned_t = path, goal.copy(), view.t
             st.best_left_m, st.best_t = np.inf, view.t
             st.failed = path is None
@@ -207,7 +209,14 @@ class Planner:
         return out
 
     def plan(
-        self, cm: Costmap, pose: np.ndarray, goal: np.ndarray, run_extra=None, *, work=None
+        self,
+        cm: Costmap,
+        pose: np.ndarray,
+        goal: np.ndarray,
+        run_extra=None,
+        *,
+        work=None,
+        footprint: Footprint | None = None,
     ) -> np.ndarray | None:
         """A path that ends with a straight run along the goal's axis.
 
@@ -217,7 +226,9 @@ class Planner:
         skid arrives aligned. Falls back to a direct path when neither staging point can be
         reached or the skid is already close. ``run_extra(points)``: the extra cost per metre the
         fleet layers add along a run (``inf``: blocked by a parked skid). ``work``: if given (a
-        list), the number of grid cells the search expanded is appended to it.
+        list), the number of grid cells the search expanded is appended to it. ``footprint``:
+        the skid's, whose straight run from a staging point to the goal must be clear of the
+        map's walls (:func:`run_clear`), not only the axis line.
         """
         axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
         stages = [goal[:2] + side * self.staging_m * axis for side in (-1.0, 1.0)]
@@ -234,6 +245,8 @@ class Planner:
         best, best_cost = None, np.inf
         for stage, head, c in zip(stages, heads, costs[1:], strict=True):
             run = self._run_cost(cm, goal, stage, run_extra)
+            if footprint is not None and not run_clear(cm.grid, goal, stage, footprint):
+                run = np.inf
             if head is None or not np.isfinite(run):
                 continue
             cand = np.vstack([shortcut(head, cm.cost, cm.grid, cm.blind), goal[:2][None]])
@@ -255,3 +268,31 @@ class Planner:
             return np.inf
         extra = 0.0 if run_extra is None else run_extra(run[1:])
         return float(np.linalg.norm(stage - goal[:2]) * (1.0 + extra))
+
+
+def run_clear(grid, goal: np.ndarray, stage: np.ndarray, footprint: Footprint) -> bool:
+    """Whether a skid with ``footprint`` drives straight along the goal's axis from ``stage``
+    to ``goal`` clear of ``grid``'s occupied cells: the rectangle it sweeps, shrunk by half a
+    cell (a footprint touching a wall's cell is not blocked by it), sampled at half the
+    resolution. The axis line alone passed a run past a pillar that overlapped the spot's
+    side by 0.25 m: the skid came in beside the pillar and needed a manoeuvre (25 s) to get
+    in, where backing in from the other side is clear."""
+    axis = np.array([np.cos(goal[2]), np.sin(goal[2])])
+    side = float(np.dot(stage[:2] - goal[:2], axis))
+    res = grid.resolution_m
+    shrink = 0.5 * res + 1e-6
+    x0 = min(0.0, side) - footprint.pivot + shrink
+    x1 = max(0.0, side) + footprint.length_m - footprint.pivot - shrink
+    h = footprint.width_m / 2.0 - shrink
+    if x1 <= x0 or h <= 0:
+        return True
+    xs = np.linspace(x0, x1, int(np.ceil((x1 - x0) / (0.5 * res))) + 1)
+    ys = np.linspace(-h, h, int(np.ceil(2.0 * h / (0.5 * res))) + 1)
+    bx, by = np.meshgrid(xs, ys)
+    normal = np.array([-axis[1], axis[0]])
+    pts = goal[:2] + bx.reshape(-1, 1) * axis + by.reshape(-1, 1) * normal
+    rc = grid.world_to_cell(pts)
+    inside = grid.in_bounds(rc)
+    if not inside.all():
+        return False
+    return not grid.occupied[rc[:, 0], rc[:, 1]].any()

@@ -139,7 +139,10 @@ class GiveWayState:
 class GiveWay:
     """Right of way at bottlenecks: a skid held up by a skid of higher rank (priority, then
     nearer its goal, then lower index) for ``after_s`` backs away from it for up to
-    ``duration_s``, so the other can pass. Docking skids never give way.
+    ``duration_s``, so the other can pass, if the other is held up in turn (by this skid, or
+    by anything for ``after_s``): one that drives on unhindered needs no room (a skid backed
+    2.4 m away from a neighbour docking beside it, and drove back). Docking skids never give
+    way.
 
     A skid of lower rank may be unable to clear (boxed in, turning on the spot between parked
     skids and the ones waiting for it): held up by it for ``inherit_after_s``, the skid of
@@ -162,7 +165,15 @@ class GiveWay:
                 st.until_s = -np.inf
                 continue
             if view.t >= st.until_s and st.blocked_s >= p.after_s:
-                better = [j for j in st.blockers if j in rank and rank[j] < rank[int(i)]]
+                # A skid of higher rank that drives on unhindered passes by itself: only one
+                # held up by this skid (or held up a while by anything) is given way.
+                better = [
+                    j
+                    for j in st.blockers
+                    if j in rank
+                    and rank[j] < rank[int(i)]
+                    and (int(i) in states[j].blockers or states[j].held_s >= p.after_s)
+                ]
                 better += [j for j in st.blockers if j not in rank]  # idle/parked skids
                 if not better and st.held_s >= p.inherit_after_s:
                     better = [j for j in st.blockers if j in rank]  # they could not clear
