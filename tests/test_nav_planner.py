@@ -29,6 +29,26 @@ def test_the_path_ends_with_a_run_along_the_goal_axis():
     assert len(near) == 2
 
 
+def test_close_by_it_goes_round_when_its_own_side_has_no_clear_run_to_the_spot():
+    # A pillar beside the spot's west end: a skid 1.75 m west of the spot (close enough to
+    # go straight in) cannot sweep its rectangle along the axis from there, so the path goes
+    # round to the staging point east of the spot and the skid backs in (traced on a 4-skid
+    # hangar training site: the skid stood at the pillar for 120 s).
+    goal = [5.0, 3.0, 0.0]
+    pillar = (3.6, 2.2, 4.3, 2.8)
+    view = make_view([[3.4, 3.7, 0.0]], [goal], boxes=[pillar])
+    pl = _planner()
+    cm = pl.costmap(view, view.footprints[0])
+    path = pl.plan(cm, view.poses[0], view.goals[0], footprint=view.footprints[0])
+    assert path[-1] == pytest.approx(goal[:2])
+    assert path[-2] == pytest.approx([5.9, 3.0], abs=1e-6)  # staging east: backing in
+    # Without the pillar it goes straight in, as before.
+    open_view = make_view([[3.4, 3.7, 0.0]], [goal])
+    cm = pl.costmap(open_view, open_view.footprints[0])
+    near = pl.plan(cm, open_view.poses[0], open_view.goals[0], footprint=open_view.footprints[0])
+    assert len(near) == 2 and near[-1] == pytest.approx(goal[:2], abs=0.05)
+
+
 def test_plans_are_bounded_per_tick_and_made_for_the_current_goal():
     poses = [[1.0, 1.0 + k, 0.0] for k in range(4)]
     goals = [[8.0, 1.0 + k, 0.0] for k in range(4)]

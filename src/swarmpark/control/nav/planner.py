@@ -241,7 +241,12 @@ class Planner:
         if direct is None:
             return None
         if np.linalg.norm(goal[:2] - pose[:2]) < self.direct_within_m:
-            return shortcut(direct, cm.cost, cm.grid, cm.blind)
+            # Close by, straight in, unless the side it stands on has no clear run to the
+            # spot (a pillar beside it): then round to the other side's staging point.
+            side = -1 if np.dot(pose[:2] - goal[:2], axis) < 0 else 1
+            near = stages[(side + 1) // 2]
+            if footprint is None or run_clear(cm.grid, goal, near, footprint):
+                return shortcut(direct, cm.cost, cm.grid, cm.blind)
         best, best_cost = None, np.inf
         for stage, head, c in zip(stages, heads, costs[1:], strict=True):
             run = self._run_cost(cm, goal, stage, run_extra)
