@@ -141,7 +141,7 @@ class CollisionMonitor:
         first_safe = np.where(safe.any(axis=1), np.argmax(safe, axis=1), S - 1)
         out = raw.copy()
         out[:, 0] *= scales[first_safe]
-        out[~safe[:, -1]] = 0.0
+        out[~safe.any(axis=1)] = 0.0
         # A skid whose turn is what collides (its corner swings into a wall it drives along)
         # drives on straight instead, if that is safe, until it has room to turn.
         if straight:
