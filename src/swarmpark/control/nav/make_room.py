@@ -141,6 +141,70 @@ class MakeRoom:
             self._aside(view, rows, ways, rooms, scene, res)
         return res
 
+    def step_waiting(
+        self,
+        view: ControlView,
+        waiting: np.ndarray,
+        settled: np.ndarray,
+        paths: list[PathState],
+        rooms: list[RoomState],
+        scene: Scene,
+        keep_out=None,
+    ) -> RoomResult:
+        """Monitor mode: skids waiting on purpose (``waiting`` ``(N,)``: held back by the fill
+        order or queued at a bottleneck) that stand in the way of a skid on the move (neither
+        settled nor waiting) drive along their axis out of it, as a parked skid makes room,
+        and stay there while they wait. ``keep_out[i]``: a shapely geometry skid ``i`` must
+        not move into (the boundary it is held outside of, grown by the hold's gap), or None.
+
+        A held skid stops 1 m outside its boundary, which at a bay's door is where the skids
+        it waits for have to pass (found on a generated 4-skid elevator: the skid waiting for
+        the deeper one stood in the door's approach, and the deeper one, unable to pass it,
+        circled behind it for the rest of the run)."""
+        n = len(view.poses)
+        res = RoomResult(np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
+        still = view.active & waiting & ~settled
+        if view.stopped is not None:
+            still &= ~view.stopped
+        movers = view.active & ~settled & ~waiting
+        if view.stopped is not None:
+            movers &= ~view.stopped
+        for i in np.flatnonzero(view.active & ~settled & ~waiting):
+            rooms[i].side = 0  # on the move again: it stood aside for the last time
+        cand = np.flatnonzero(still)
+        if not len(cand) or not movers.any():
+            return res
+        ways = []
+        p = self.params
+        for j in np.flatnonzero(movers):
+            line = path_ahead(view, j, paths[j], p.lookahead_m)
+            half = view.footprints[j].width_m / 2 + p.clearance_m
+            ways.append(shapely.LineString(line).buffer(half, cap_style="flat"))
+            ways.append(shapely.Polygon(scene.corners_now(view, j)).buffer(p.clearance_m))
+        way = shapely.union_all(ways)
+        shapely.prepare(way)
+        feet = shapely.polygons(footprint_corners(view.poses[cand], scene.skids.plain[cand]))
+        inside = shapely.intersects(way, feet)
+        for i, hit in zip(cand.tolist(), inside.tolist(), strict=True):
+            st = rooms[i]
+            if not hit:
+                res.aside[i] = bool(st.side)  # waits where it stood aside
+                continue
+            res.aside[i] = True
+            zone = None if keep_out is None or i >= len(keep_out) else keep_out[i]
+            best = self._nearest_free_shift(
+                view, i, way if zone is None else shapely.union(way, zone), st.side, scene
+            )
+            if best is None:
+                continue
+            st.side = int(np.sign(best))
+            res.speed[i] = np.clip(
+                p.gain_per_s * (best + np.sign(best) * p.overshoot_m),
+                -view.max_speed[i],
+                view.max_speed[i],
+            )
+        return res
+
     def _aside(self, view, cand, corridors, rooms, scene, res: RoomResult) -> None:
         """Fills ``res`` for the settled skids ``cand`` against the ways ``corridors`` (from
         :meth:`corridors`). A person's walk counts for a skid only if it crosses the skid's

@@ -226,7 +226,7 @@ class Navigator:
             cmd[moving] = self._monitor(view, moving, full[moving], joint=True)
             self._guard_aside(view, moving[aside], full, cmd)
         else:
-            raw = self._make_room(view, idx, raw)
+            raw = self._make_room(view, idx, raw, fleet.waiting)
             docked_all = [r.dock.docked for r in self.robots]  # per robot, not per row
             raw = self.give_way.step(
                 view, idx, raw, dist_goal, self._states("give_way"), docked_all
@@ -337,10 +337,14 @@ class Navigator:
         )
         return full[idx]
 
-    def _make_room(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    def _make_room(
+        self, view: ControlView, idx: np.ndarray, raw: np.ndarray, waiting: np.ndarray
+    ) -> np.ndarray:
         """Monitor mode: parked skids in the way of a skid of higher priority move aside
-        along their axis (:mod:`.make_room`) and dock again once it has passed."""
+        along their axis (:mod:`.make_room`) and dock again once it has passed; skids
+        ``waiting`` on purpose (fill order, queues) move out of the way of skids on the move."""
         settled, _ = self._settled(view)
+        p = self.params
         room = self.make_room.step(
             view,
             settled,
@@ -348,15 +352,34 @@ class Navigator:
             self._states("room"),
             self.scene,
             by_priority=True,
-            people=self.params.people.enabled,
+            people=p.people.enabled,
         )
-        self.making_room = room.aside
+        speed, aside = room.speed, room.aside
+        if p.make_room.for_waiting:
+            zones = None
+            if view.hold is not None and view.hold.any():
+                zones = [
+                    z.buffer(p.hold.gap_m) if h and z is not None else None
+                    for h, z in zip(view.hold, view.hold_zones, strict=False)
+                ]
+            wait = self.make_room.step_waiting(
+                view,
+                waiting,
+                settled,
+                self._states("path"),
+                self._states("room"),
+                self.scene,
+                zones,
+            )
+            speed = np.where(wait.aside, wait.speed, speed)
+            aside = aside | wait.aside
+        self.making_room = aside
         for i in np.flatnonzero(room.undock):
             self.robots[i].dock.docked = False  # dock again precisely once the way is clear
-        rows = np.flatnonzero(room.aside[idx])
+        rows = np.flatnonzero(aside[idx])
         if len(rows):
             raw = raw.copy()
-            raw[rows, 0] = room.speed[idx[rows]]
+            raw[rows, 0] = speed[idx[rows]]
             raw[rows, 1] = 0.0
         return raw
 

@@ -519,6 +519,10 @@ class MakeRoomParams:
     #: other skid until it docks, so the parked neighbours in its way make room (priority
     #: inheritance).
     for_walled: bool = True
+    #: Monitor mode: a skid waiting on purpose (held back by the fill order, queued at a
+    #: bottleneck) in the way of a skid on the move drives along its axis out of it
+    #: (:meth:`.make_room.MakeRoom.step_waiting`).
+    for_waiting: bool = True
 
     def __post_init__(self) -> None:
         _check(self, {"lookahead_m": ">0", "clearance_m": ">=0", "gain_per_s": ">0"})
