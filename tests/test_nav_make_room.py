@@ -4,6 +4,7 @@ a skid pushed past a spot filled since is cut off from its own."""
 
 import numpy as np
 from navkit import make_view
+from shapely.geometry import box
 
 from swarmpark.control.nav.follower import PathState
 from swarmpark.control.nav.make_room import MakeRoom, RoomState, cut_off
@@ -88,3 +89,37 @@ def test_a_neighbour_pushed_along_with_it_does_not_cut_it_off():
 def test_a_skid_on_its_spot_or_with_a_clear_way_back_is_not_cut_off():
     assert _column(2.0, 4.0) == [False, False]
     assert _column(1.2, 4.0) == [False, False]  # pushed the other way
+
+
+def _waiting(pose, keep_out=None, rooms=None):
+    """Skid 0 waits on purpose (held back) at ``pose``, its goal far off; skid 1 drives along
+    y = 3 from x = 1.5."""
+    view = make_view([pose, [1.5, 3.0, 0.0]], [[8.0, 5.0, 0.0], [9.0, 3.0, 0.0]])
+    scene = Scene(0.1, 0.03).update(view)
+    paths = [PathState(), PathState(path=MOVER_PATH)]
+    rooms = rooms or [RoomState(), RoomState()]
+    res = MakeRoom(MakeRoomParams()).step_waiting(
+        view, np.array([True, False]), np.zeros(2, bool), paths, rooms, scene, keep_out
+    )
+    return res, rooms
+
+
+def test_a_waiting_skid_in_the_way_of_one_on_the_move_drives_out_of_it():
+    res, rooms = _waiting([5.0, 3.0, np.pi / 2])
+    assert res.aside[0] and res.speed[0] > 0 and rooms[0].side == 1
+    assert not res.aside[1]
+    # Out of the way, it stays where it stood aside while it waits.
+    res, rooms = _waiting([5.0, 4.5, np.pi / 2], rooms=rooms)
+    assert res.aside[0] and res.speed[0] == 0.0 and rooms[0].side == 1
+
+
+def test_a_waiting_skid_does_not_move_towards_the_boundary_it_waits_outside():
+    # Its boundary (grown by the hold's gap) lies on the + side: it backs out the other way.
+    zone = box(4.0, 4.2, 6.0, 6.0)
+    res, rooms = _waiting([5.0, 3.0, np.pi / 2], keep_out=[zone, None])
+    assert res.speed[0] < 0 and rooms[0].side == -1
+
+
+def test_a_waiting_skid_out_of_every_way_is_left_alone():
+    res, rooms = _waiting([5.0, 5.0, np.pi / 2])
+    assert not res.aside.any() and rooms[0].side == 0

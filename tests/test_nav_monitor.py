@@ -74,6 +74,17 @@ def test_turning_into_a_wall_in_place_is_stopped_too():
     assert np.array_equal(res.commands, np.zeros((1, 2)))
 
 
+def test_a_skid_whose_turn_in_place_would_hit_still_drives_out_turning():
+    # The rear-right corner (1.4, 2.6) 2 cm above a box behind it: turning in place swings it
+    # into the box, driving forwards while turning takes it clear. The monitor once stopped
+    # every command whose turn in place was unsafe, even with a safe speed (a skid in a
+    # generated elevator stood 50 s beside a parked neighbour, its manoeuvre held each time).
+    view = make_view([[2.0, 3.0, 0.0]], boxes=[(0.5, 2.0, 1.45, 2.58)])
+    assert np.array_equal(_check(view, [[0.0, 0.3]]).commands, np.zeros((1, 2)))
+    raw = np.array([[0.5, 0.3]])
+    assert np.array_equal(_check(view, raw, straight=True).commands, raw)
+
+
 def test_rollout_is_the_unicycle_integration_at_steady_speed():
     cmd = np.array([[0.4, 0.7]])
     view = make_view([[2.0, 3.0, 0.3]], vel=cmd, dt=0.1)
