@@ -181,6 +181,15 @@ class ManoeuvrePlanner:
             return None
         occ = grid.occupied[r0:r1, c0:c1].copy()
         origin = np.array([grid.origin[0] + c0 * res, grid.origin[1] + r0 * res])
+        # On a coarse map the lattice is searched on cells of at most max_cell_m (each map
+        # cell split): the other skids are stamped at that resolution, and the footprint's
+        # checks err by half a cell. At 10 cm a turn between two parked neighbours passed the
+        # search that the monitor (3 cm margin, exact rectangles) then refused, again and
+        # again (a generated open deck: 50 s, to the end of the run).
+        split = int(np.ceil(res / p.max_cell_m - 1e-9))
+        if split > 1:
+            occ = np.repeat(np.repeat(occ, split, axis=0), split, axis=1)
+            res = res / split
         for j in range(len(view.poses)):
             if j != i and (leave_out is None or not leave_out[j]):
                 stamp_footprint(

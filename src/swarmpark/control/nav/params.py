@@ -192,6 +192,8 @@ class ManoeuvreParams:
     #: ``max_window_m`` on a side (farther goals are left to the path planner's repairs).
     window_margin_m: float = 2.5
     max_window_m: float = 14.0
+    #: The lattice's cells are the map's, split where the map is coarser than this.
+    max_cell_m: float = 0.05
     #: Other skids are obstacles grown by this; people by ``person_margin_m``; the skid's own
     #: footprint is grown by ``grow_m`` (besides half a cell diagonal) for collision checks.
     skid_margin_m: float = 0.05
@@ -242,6 +244,7 @@ class ManoeuvreParams:
         _check(self, {"near_goal_m": ">=0", "near_stuck_s": ">0"})
         _check(self, {"roam_m": ">0", "escape_step_m": ">0", "escape_max_m": ">=0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
+        _check(self, {"max_cell_m": ">0"})
         _check(
             self, {"grow_m": ">=0", "roomy_grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"}
         )
