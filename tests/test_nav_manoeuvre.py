@@ -143,3 +143,64 @@ def test_runs_and_turns_brake_onto_their_ends():
         ends.append(next(t for t, running, _ in trace if t > t0 and not running) - t0)
         assert np.hypot(*(view.poses[0, :2] - GOAL[:2])) < 0.06
     assert ends[0] < ends[1] - 2.0
+
+
+def test_on_a_coarse_map_a_manoeuvre_keeps_the_monitors_margin():
+    """A generated open deck (10 cm map, seed 3040): skid 1 stands 0.3 m past its spot and
+    22 deg off, a parked neighbour ahead on its right. Searched on the map's 10 cm cells, the
+    manoeuvre began with a turn on the spot, checked at the centre of the skid's cell 4 cm
+    from where it stands, that swept its corner within the monitor's 3 cm of that neighbour
+    (the monitor refused it, and the skid planned it again for 100 s); on 5 cm cells every
+    pose of it keeps the margin from the other skids."""
+    from dataclasses import replace
+
+    from shapely.geometry import Polygon
+    from shapely.geometry import box as shapely_box
+
+    from swarmpark.core.geometry import Footprint, footprint_corners
+    from swarmpark.core.gridmap import grid_from_walls
+
+    small = Footprint(1.0, 0.7, 0.5)
+    fps = (small, small, Footprint(1.2, 0.8, 0.6), small, small)
+    shift = np.array([12.0, 6.0, 0.0])
+    poses = (
+        np.array(
+            [
+                [16.8728, 7.7581, -0.0247],
+                [16.9927, 9.2743, -0.3752],
+                [15.1093, 9.1347, 0.0259],
+                [18.1079, 8.8464, 0.025],
+                [18.109, 9.9703, -0.0037],
+            ]
+        )
+        - shift
+    )
+    goals = poses.copy()
+    goals[1] = np.array([16.717, 9.1412, 0.0]) - shift
+    view = make_view(poses, goals, active=[False, True, False, False, False])
+    view = replace(
+        view, footprints=fps, grid=grid_from_walls((10.0, 6.0), 0.1, [shapely_box(0, 0, 0.1, 0.1)])
+    )
+    st = ManoeuvreState()
+    ManoeuvrePlanner(ManoeuvreParams())._start(view, 1, st)
+    assert st.running()
+    others = [
+        Polygon(c)
+        for c in footprint_corners(
+            np.delete(poses, 1, 0),
+            np.array([f.corners_body() for k, f in enumerate(fps) if k != 1]),
+        )
+    ]
+    body = small.corners_body()[None]
+    for n, (kind, a, b) in enumerate(st.segments):
+        if n == 0:  # the first segment starts where the skid stands, not at its cell's centre
+            a = np.array([*poses[1, :2], a[2]])
+            b = np.array([*poses[1, :2], b[2]]) if kind == "turn" else b
+        for f in np.linspace(0.0, 1.0, 21):
+            pose = (
+                a + f * (b - a)
+                if kind != "turn"
+                else np.array([*a[:2], a[2] + f * np.angle(np.exp(1j * (b[2] - a[2])))])
+            )
+            me = Polygon(footprint_corners(pose[None], body)[0])
+            assert min(me.distance(o) for o in others) >= 0.03 - 1e-3, (kind, pose)
