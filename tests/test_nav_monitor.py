@@ -85,6 +85,29 @@ def test_a_skid_whose_turn_in_place_would_hit_still_drives_out_turning():
     assert np.array_equal(_check(view, raw, straight=True).commands, raw)
 
 
+def test_a_turn_on_the_spot_that_would_overrun_into_a_neighbour_is_slowed_not_stopped():
+    # A generated open deck (seed 3040): skid 1 turns on the spot 10 deg short of its goal
+    # heading beside a parked neighbour (skid 3). Held at 0.5 rad/s for the 1 s horizon the
+    # turn sweeps 29 deg, into the neighbour; at 0.3 rad/s it is safe. Refused outright, the
+    # turn stopped there for good.
+    small = Footprint(1.0, 0.7, 0.5)
+    poses = np.array(
+        [
+            [4.8728, 1.7581, -0.0247],
+            [4.992, 3.2747, -0.1771],
+            [3.1093, 3.1347, 0.0259],
+            [6.1079, 2.8464, 0.025],
+            [6.109, 3.9703, -0.0037],
+        ]
+    )
+    fps = (small, small, Footprint(1.2, 0.8, 0.6), small, small)
+    view = replace(make_view(poses), footprints=fps, max_yaw_accel=np.full(5, 2.0))
+    scene = Scene(0.1, MonitorParams().margin_m).update(view)
+    mon = CollisionMonitor(MonitorParams())
+    res = mon.check(view, np.array([1]), np.array([[0.0, 0.5]]), scene)
+    assert np.allclose(res.commands, [[0.0, 0.3]]) and res.blockers == [{3}]
+
+
 def test_rollout_is_the_unicycle_integration_at_steady_speed():
     cmd = np.array([[0.4, 0.7]])
     view = make_view([[2.0, 3.0, 0.3]], vel=cmd, dt=0.1)

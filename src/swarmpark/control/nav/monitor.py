@@ -146,6 +146,7 @@ class CollisionMonitor:
         # drives on straight instead, if that is safe, until it has room to turn.
         if straight:
             self._straight_on(view, idx, raw, out, ~safe.any(axis=1), body, scene, others, robots)
+        self._slower_turn(view, idx, raw, out, ~safe.any(axis=1), body, scene, others, robots)
         slowed = first_safe > 0
         for b, s in zip(blockers, slowed.tolist(), strict=True):
             if b and not s:
@@ -169,6 +170,23 @@ class CollisionMonitor:
         k = turn[ok]
         out[k, 0] = raw[k, 0] * self.scales[np.argmax(safe[ok], axis=1)]
         out[k, 1] = 0.0
+
+    def _slower_turn(self, view, idx, raw, out, stuck, body, scene, others, robots) -> None:
+        """Rows ``stuck`` (no speed safe) that only turn on the spot get the fastest of the
+        turn rate's shares ``scales[1:-1]`` that is safe, if any (in place on ``out``). The
+        rollout holds the rate for the whole horizon, past where a turn ending short of a
+        neighbour would stop: a skid 10 deg from the end of a turn (braking onto it, 0.5
+        rad/s) was refused again and again beside a parked neighbour on a generated open
+        deck, where 0.3 rad/s was safe."""
+        turn = np.flatnonzero(stuck & (raw[:, 0] == 0.0) & (raw[:, 1] != 0.0))
+        for share in self.scales[1:-1]:
+            if not len(turn):
+                return
+            cmd = np.column_stack([np.zeros(len(turn)), raw[turn, 1] * share])
+            bad, _ = self._unsafe(view, idx[turn], cmd, body[turn], scene, others, robots)
+            ok = ~bad[:, -1].any(axis=1)
+            out[turn[ok]] = cmd[ok]
+            turn = turn[~ok]
 
     def _unsafe(self, view, idx, raw, body, scene, others, robots: bool):
         """``(n, S, T)`` whether skid ``idx[k]`` commanded ``raw[k]`` at speed scale ``s``
