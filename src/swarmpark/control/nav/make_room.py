@@ -7,6 +7,8 @@ who outrank every skid (issue 15: people have the right of way; skids on the mov
 them by :mod:`.people`); skids of equal priority keep their spots. A skid walled in by
 parked skids (no manoeuvre to its spot round them, one without them) ranks above all others
 until it docks (the navigator's priority inheritance), so its parked neighbours make room.
+Skids waiting on purpose (held back by the fill order, queued at a bottleneck) make room in
+monitor mode too, for any skid on the move (:meth:`MakeRoom.step_waiting`).
 
 The corridors are the paths (rear to ``lookahead_m`` ahead) of the skids on the move and the
 walks of people, widened by the mover's half-width plus ``clearance_m``. A settled skid inside

@@ -7,7 +7,8 @@ path towards a lookahead pose (:mod:`.follower`); near the goal the docking mano
 monitor alone (:mod:`.monitor`, as Navigation2's, with right of way at bottlenecks, keep right
 on the field's aim, :mod:`.keep_right`, and parked skids making room, :mod:`.make_room`, for a
 skid of higher priority or one walled in by parked skids, which ranks above the others until it
-docks) or ORCA (:mod:`.avoidance`, with :mod:`.make_room`) followed by the monitor. Skids held
+docks, and skids waiting for the fill order or a door stepping out of the way of those on the
+move) or ORCA (:mod:`.avoidance`, with :mod:`.make_room`) followed by the monitor. Skids held
 still or making no progress recover (:mod:`.recovery`). Shared geometry is in :mod:`.scene`,
 every tuning value in :mod:`.params`.
 
