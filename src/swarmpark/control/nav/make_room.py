@@ -176,14 +176,10 @@ class MakeRoom:
         cand = np.flatnonzero(still)
         if not len(cand) or not movers.any():
             return res
-        ways = []
-        p = self.params
-        for j in np.flatnonzero(movers):
-            line = path_ahead(view, j, paths[j], p.lookahead_m)
-            half = view.footprints[j].width_m / 2 + p.clearance_m
-            ways.append(shapely.LineString(line).buffer(half, cap_style="flat"))
-            ways.append(shapely.Polygon(scene.corners_now(view, j)).buffer(p.clearance_m))
-        way = shapely.union_all(ways)
+        # The ways of the skids on the move: neither settled nor waiting (nor stopped).
+        still_too = settled | waiting if view.stopped is None else settled | waiting | view.stopped
+        ways = self.corridors(view, still_too, paths, scene, people=False)
+        way = shapely.union_all([g for g, _ in ways])
         shapely.prepare(way)
         feet = shapely.polygons(footprint_corners(view.poses[cand], scene.skids.plain[cand]))
         inside = shapely.intersects(way, feet)
@@ -200,12 +196,19 @@ class MakeRoom:
             if best is None:
                 continue
             st.side = int(np.sign(best))
-            res.speed[i] = np.clip(
-                p.gain_per_s * (best + np.sign(best) * p.overshoot_m),
+            res.speed[i] = self._shift_speed(view, i, best)
+        return res
+
+    def _shift_speed(self, view: ControlView, i: int, shift: float) -> float:
+        """Skid ``i``'s speed along its axis towards a shift of ``shift`` metres."""
+        p = self.params
+        return float(
+            np.clip(
+                p.gain_per_s * (shift + np.sign(shift) * p.overshoot_m),
                 -view.max_speed[i],
                 view.max_speed[i],
             )
-        return res
+        )
 
     def _aside(self, view, cand, corridors, rooms, scene, res: RoomResult) -> None:
         """Fills ``res`` for the settled skids ``cand`` against the ways ``corridors`` (from
@@ -258,12 +261,7 @@ class MakeRoom:
                 continue
             st.side = int(np.sign(best))
             res.undock[i] = True  # dock again precisely once the way is clear
-            p = self.params
-            res.speed[i] = np.clip(
-                p.gain_per_s * (best + np.sign(best) * p.overshoot_m),
-                -view.max_speed[i],
-                view.max_speed[i],
-            )
+            res.speed[i] = self._shift_speed(view, i, best)
 
     def _nearest_free_shift(self, view, i, way, side: int, scene: Scene) -> float | None:
         """The smallest shift along skid ``i``'s axis clear of ``way`` and static solids, on
