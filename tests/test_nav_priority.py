@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from helpers import make_world
 
-from swarmpark.apps.generate import generate
 from swarmpark.apps.run import run_world
 from swarmpark.control.nav.follower import PathState
 from swarmpark.control.nav.make_room import MakeRoom, RoomState
@@ -120,31 +119,44 @@ def test_a_walled_in_skid_ranks_above_all_until_it_docks_and_parked_skids_make_r
     assert off._inherit(view) is view
 
 
+def _walled_row() -> dict:
+    """Two skids parked side by side facing east with a spot between them 6 cm wider than a
+    skid on each side; the third skid, sent there 20 s later from the south-east, has to
+    come round and cannot get in past its neighbours."""
+    return {
+        "name": "walled-in-row",
+        "seed": 0,
+        "dt_s": 0.05,
+        "duration_s": 90,
+        "map": {"size_m": [16, 12], "resolution_m": 0.05},
+        "robots": [
+            {"id": "n1", "pose": [8.6, 1.5, 90.0]},
+            {"id": "n2", "pose": [10.5, 1.5, 90.0]},
+            {"id": "a", "pose": [12.0, 1.5, 90.0]},
+        ],
+        "commands": [
+            {"at_s": 0, "goto": {"robot": "n1", "pose": [10.0, 5.14, 0.0]}},
+            {"at_s": 0, "goto": {"robot": "n2", "pose": [10.0, 6.86, 0.0]}},
+            {"at_s": 20, "goto": {"robot": "a", "pose": [10.0, 6.0, 0.0]}},
+        ],
+    }
+
+
 @pytest.mark.slow
-def test_a_walled_in_spot_is_reached_once_a_neighbour_makes_room(monkeypatch):
-    # Generated open deck (training seed 2005), truth localization: two rows of three spots
-    # facing east, 0.3-0.5 m apart, so a middle spot is entered along its axis only. With the
-    # fill order's holds (the rectangle's blocks, followers short of their spot) its
-    # neighbours wait for it, and the site parks with or without the rule.
-    data = generate("open-deck", 2005, robots=6)
-    data.pop("sensing")
-    off = Navigator(NavParams(make_room=MakeRoomParams(for_walled=False)))
-    r = run_world(build_world(parse_scenario(data)), controller=off).result
-    assert r["success"] and r["collisions"] == []
-    # Without the holds its skid arrives last, between parked neighbours: walled in, it
-    # outranks them, an end skid backs out of the row and docks again. Without the rule as
-    # well it stays 0.58 m off its spot.
-    monkeypatch.setattr(
-        Supervisor,
-        "_fill_holds",
-        lambda self, goals, fps, boundary, order: (order, tuple(() for _ in goals), None, None),
-    )
-    r = run_world(build_world(parse_scenario(data))).result
+def test_a_walled_in_spot_is_reached_once_its_neighbours_make_room():
+    # Its manoeuvre search finds no way in past the parked neighbours but one with them
+    # left out: walled in, it outranks them, they drive along their axis out of its way and
+    # dock again once it is in.
+    r = run_world(build_world(parse_scenario(_walled_row()))).result
     assert r["success"] and r["collisions"] == []
     assert all(s["final_position_error_m"] <= 0.05 for s in r["robots"].values())
+    assert r["min_clearance_robot_m"] > 0.02
+    # Without the rule the neighbours keep their spots and it stays half a metre out.
     off = Navigator(NavParams(make_room=MakeRoomParams(for_walled=False)))
-    r_off = run_world(build_world(parse_scenario(data)), controller=off).result
-    assert not r_off["success"]
+    r_off = run_world(build_world(parse_scenario(_walled_row())), controller=off).result
+    assert not r_off["success"] and r_off["collisions"] == []
+    assert r_off["robots"]["a"]["final_position_error_m"] > 0.3
+    assert r_off["robots"]["n1"]["final_position_error_m"] <= 0.05
 
 
 @pytest.mark.slow

@@ -160,10 +160,14 @@ class Docking:
         if (too_close or wedged) and not st.runup:
             st.runup, st.runup_from, stall.stalled_s = True, abs(e_long), 0.0
         backed = abs(e_long) - st.runup_from
+        # Held still again, it comes in again: after backing runup_min_back_m, or at once
+        # where there was no run-up to gain (already runup_m out: wedged 1.7 m past its goal,
+        # nose to the map's edge, a skid of the 20-skid circle backed 5 cm and stood there).
+        wedged = stall.stalled_s >= self.stall_s  # (again: the start reset the watch)
         if st.runup and (
             abs(e_lat) < p.runup_done_lateral_m
             or backed > p.runup_m
-            or (backed > p.runup_min_back_m and stall.stalled_s >= self.stall_s)
+            or (wedged and (backed > p.runup_min_back_m or st.runup_from >= p.runup_m))
         ):
             st.runup, stall.stalled_s = False, 0.0
 
