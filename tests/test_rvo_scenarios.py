@@ -112,7 +112,7 @@ def test_twenty_skids_cross_a_circle_to_the_antipodal_points():
 def test_the_circle_also_parks_with_the_default_stack():
     """The 20-skid circle without its ``navigation`` key (the collision monitor with right of
     way, no velocity obstacles): every skid parks within tolerance, with no collision, given
-    170 s (152.5 s measured; with RVO, the file's key, 86.7 s)."""
+    170 s (152.5 s measured; with RVO, the file's key, 88.9 s)."""
     data = yaml.safe_load((ROOT / "circle-20-antipodal.yaml").read_text())
     del data["navigation"]
     data["duration_s"] = 170.0
