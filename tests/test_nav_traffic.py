@@ -74,3 +74,24 @@ def test_skids_from_the_same_side_follow_in_a_convoy():
     tc.step(later, np.arange(2), np.zeros((2, 2)), paths, fol, states, parked)
     assert states[1].zone == 1  # ... and follows convoy_gap_s later, from the same side
     assert states[0].side == states[1].side
+
+
+def test_a_skid_standing_in_the_zone_comes_from_the_side_its_path_leads_away_from():
+    # Skid 1 starts inside the door's zone, at its west end, going east like skid 0 behind
+    # it: both are one convoy (counted from no side, it refused skid 0 the door for good).
+    view, paths = _setup([[1.2, 3.0, 0.0], [4.3, 3.0, 0.0]], [[9.0, 3.0, 0.0], [8.0, 3.5, 0.0]])
+    tc = TrafficControl(TrafficParams(convoy_gap_s=0.0))
+    assert tc._zones(view).zone_at(np.array([[4.3, 3.0]]))[0] == 1
+    states = [TrafficState(), TrafficState()]
+    fol = PathFollower(FollowerParams())
+    tc.step(view, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool))
+    west = tc.zones.region_at(np.array([[1.2, 3.0]]))[0]
+    assert states[0].zone == states[1].zone == 1 and states[0].side == states[1].side == west
+    # Going back west from the same place it comes from the east side: skid 0 waits.
+    view, paths = _setup([[1.2, 3.0, 0.0], [4.3, 3.0, np.pi]], [[9.0, 3.0, 0.0], [1.0, 1.0, np.pi]])
+    paths[1].path = np.array([[4.3, 3.0], [1.0, 1.0]])
+    states = [TrafficState(), TrafficState()]
+    tc.step(view, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool))
+    east = tc.zones.region_at(np.array([[9.5, 3.0]]))[0]
+    assert states[1].zone == 1 and states[1].side == east > 0
+    assert states[0].zone == 0 and states[0].waiting == 1
