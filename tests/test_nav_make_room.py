@@ -2,6 +2,8 @@
 axis to the nearer free side (not into a wall), keeps that side, and skids out of the way stay;
 a skid pushed past a spot filled since is cut off from its own."""
 
+from dataclasses import replace
+
 import numpy as np
 from navkit import make_view
 from shapely.geometry import box
@@ -91,15 +93,17 @@ def test_a_skid_on_its_spot_or_with_a_clear_way_back_is_not_cut_off():
     assert _column(1.2, 4.0) == [False, False]  # pushed the other way
 
 
-def _waiting(pose, keep_out=None, rooms=None):
-    """Skid 0 waits on purpose (held back) at ``pose``, its goal far off; skid 1 drives along
-    y = 3 from x = 1.5."""
+def _waiting(pose, boundary=None, rooms=None):
+    """Skid 0 waits on purpose (held back, outside ``boundary`` if given) at ``pose``, its
+    goal far off; skid 1 drives along y = 3 from x = 1.5."""
     view = make_view([pose, [1.5, 3.0, 0.0]], [[8.0, 5.0, 0.0], [9.0, 3.0, 0.0]])
+    if boundary is not None:
+        view = replace(view, hold=np.array([True, False]), hold_zones=(boundary, None))
     scene = Scene(0.1, 0.03).update(view)
     paths = [PathState(), PathState(path=MOVER_PATH)]
     rooms = rooms or [RoomState(), RoomState()]
     res = MakeRoom(MakeRoomParams()).step_waiting(
-        view, np.array([True, False]), np.zeros(2, bool), paths, rooms, scene, keep_out
+        view, np.array([True, False]), np.zeros(2, bool), paths, rooms, scene, hold_gap_m=0.2
     )
     return res, rooms
 
@@ -114,9 +118,9 @@ def test_a_waiting_skid_in_the_way_of_one_on_the_move_drives_out_of_it():
 
 
 def test_a_waiting_skid_does_not_move_towards_the_boundary_it_waits_outside():
-    # Its boundary (grown by the hold's gap) lies on the + side: it backs out the other way.
-    zone = box(4.0, 4.2, 6.0, 6.0)
-    res, rooms = _waiting([5.0, 3.0, np.pi / 2], keep_out=[zone, None])
+    # Its boundary (grown by the hold's gap, 0.2 m) lies on the + side: it backs out the
+    # other way.
+    res, rooms = _waiting([5.0, 3.0, np.pi / 2], boundary=box(4.2, 4.4, 5.8, 5.8))
     assert res.speed[0] < 0 and rooms[0].side == -1
 
 

@@ -151,13 +151,13 @@ class MakeRoom:
         paths: list[PathState],
         rooms: list[RoomState],
         scene: Scene,
-        keep_out=None,
+        hold_gap_m: float = 0.0,
     ) -> RoomResult:
         """Monitor mode: skids waiting on purpose (``waiting`` ``(N,)``: held back by the fill
         order or queued at a bottleneck) that stand in the way of a skid on the move (neither
         settled nor waiting) drive along their axis out of it, as a parked skid makes room,
-        and stay there while they wait. ``keep_out[i]``: a shapely geometry skid ``i`` must
-        not move into (the boundary it is held outside of, grown by the hold's gap), or None.
+        and stay there while they wait. A skid the fill order holds outside its boundary
+        (``view.hold``, ``view.hold_zones``) does not move into it grown by ``hold_gap_m``.
 
         A held skid stops 1 m outside its boundary, which at a bay's door is where the skids
         it waits for have to pass (found on a generated 4-skid elevator: the skid waiting for
@@ -165,20 +165,15 @@ class MakeRoom:
         circled behind it for the rest of the run)."""
         n = len(view.poses)
         res = RoomResult(np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
-        still = view.active & waiting & ~settled
-        if view.stopped is not None:
-            still &= ~view.stopped
-        movers = view.active & ~settled & ~waiting
-        if view.stopped is not None:
-            movers &= ~view.stopped
-        for i in np.flatnonzero(view.active & ~settled & ~waiting):
+        stopped = np.zeros(n, dtype=bool) if view.stopped is None else view.stopped
+        free = view.active & ~settled & ~waiting
+        for i in np.flatnonzero(free):
             rooms[i].side = 0  # on the move again: it stood aside for the last time
-        cand = np.flatnonzero(still)
-        if not len(cand) or not movers.any():
+        cand = np.flatnonzero(view.active & waiting & ~settled & ~stopped)
+        if not len(cand) or not (free & ~stopped).any():
             return res
         # The ways of the skids on the move: neither settled nor waiting (nor stopped).
-        still_too = settled | waiting if view.stopped is None else settled | waiting | view.stopped
-        ways = self.corridors(view, still_too, paths, scene, people=False)
+        ways = self.corridors(view, settled | waiting | stopped, paths, scene, people=False)
         way = shapely.union_all([g for g, _ in ways])
         shapely.prepare(way)
         feet = shapely.polygons(footprint_corners(view.poses[cand], scene.skids.plain[cand]))
@@ -189,7 +184,10 @@ class MakeRoom:
                 res.aside[i] = bool(st.side)  # waits where it stood aside
                 continue
             res.aside[i] = True
-            zone = None if keep_out is None or i >= len(keep_out) else keep_out[i]
+            zone = None
+            if view.hold is not None and view.hold[i] and i < len(view.hold_zones):
+                zone = view.hold_zones[i]
+                zone = None if zone is None else zone.buffer(hold_gap_m)
             best = self._nearest_free_shift(
                 view, i, way if zone is None else shapely.union(way, zone), st.side, scene
             )

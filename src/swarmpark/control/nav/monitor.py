@@ -138,15 +138,16 @@ class CollisionMonitor:
         bad, blockers = self._unsafe(view, idx, raw, body, scene, others, robots)
         # The fastest safe scale; if even turning in place collides, stop turning as well.
         safe = ~bad.any(axis=2)
-        first_safe = np.where(safe.any(axis=1), np.argmax(safe, axis=1), S - 1)
+        stuck = ~safe.any(axis=1)
+        first_safe = np.where(stuck, S - 1, np.argmax(safe, axis=1))
         out = raw.copy()
         out[:, 0] *= scales[first_safe]
-        out[~safe.any(axis=1)] = 0.0
+        out[stuck] = 0.0
         # A skid whose turn is what collides (its corner swings into a wall it drives along)
         # drives on straight instead, if that is safe, until it has room to turn.
         if straight:
-            self._straight_on(view, idx, raw, out, ~safe.any(axis=1), body, scene, others, robots)
-        self._slower_turn(view, idx, raw, out, ~safe.any(axis=1), body, scene, others, robots)
+            self._straight_on(view, idx, raw, out, stuck, body, scene, others, robots)
+        self._slower_turn(view, idx, raw, out, stuck, body, scene, others, robots)
         slowed = first_safe > 0
         for b, s in zip(blockers, slowed.tolist(), strict=True):
             if b and not s:

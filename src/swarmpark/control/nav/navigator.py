@@ -357,12 +357,6 @@ class Navigator:
         )
         speed, aside = room.speed, room.aside
         if p.make_room.for_waiting:
-            zones = None
-            if view.hold is not None and view.hold.any():
-                zones = [
-                    z.buffer(p.hold.gap_m) if h and z is not None else None
-                    for h, z in zip(view.hold, view.hold_zones, strict=False)
-                ]
             wait = self.make_room.step_waiting(
                 view,
                 waiting,
@@ -370,7 +364,7 @@ class Navigator:
                 self._states("path"),
                 self._states("room"),
                 self.scene,
-                zones,
+                p.hold.gap_m,
             )
             speed = np.where(wait.aside, wait.speed, speed)
             aside = aside | wait.aside

@@ -55,7 +55,9 @@ class TrafficControl:
         self._grid = None
         self._fps = None
         self.zones: Bottlenecks | None = None
-        self._joined: tuple[Bottlenecks, list] | None = None
+        # Derived from the zones, on demand (only skids standing in a zone need them).
+        self._joins: list[tuple[int, ...]] | None = None
+        self._distance: dict[int, np.ndarray] = {}
 
     def prepare(self, view: ControlView) -> None:
         """Find the map's bottlenecks now (before the first tick)."""
@@ -76,6 +78,7 @@ class TrafficControl:
                 resolution_m=max(p.resolution_m, view.grid.resolution_m),
             )
             self._grid, self._fps = view.grid, fps
+            self._joins, self._distance = None, {}
         return self.zones
 
     def step(
@@ -170,22 +173,21 @@ class TrafficControl:
         the zone does not join two). Counted as side 0, skids that started in a corridor's
         mouth refused a convoy from the side they were going with, headed its queue and held
         it for good (a generated corridor: none of 10 skids went through in 190 s)."""
-        joined = self._joins(z)[zone - 1]
+        if self._joins is None:
+            grown = ndimage.grey_dilation(z.zone, size=(3, 3))
+            self._joins = []
+            for k in range(1, z.count + 1):
+                near = z.region[(grown == k) & (z.zone == 0)]
+                self._joins.append(tuple(np.unique(near[near > 0]).tolist()))
+        joined = self._joins[zone - 1]
         if len(joined) != 2:
             return 0
         ends = z.cells(st.path[[0, -1]])
-        away = [float(d[ends][0] - d[ends][1]) for _, d in joined]
-        return joined[int(np.argmin(away))][0]
+        away = [float(d[ends][0] - d[ends][1]) for d in map(self._region_distance, joined)]
+        return joined[int(np.argmin(away))]
 
-    def _joins(self, z: Bottlenecks) -> list[list[tuple[int, np.ndarray]]]:
-        """Per zone, the regions next to it, each with its distance map (cells), cached
-        with the zones."""
-        if self._joined is None or self._joined[0] is not z:
-            grown = ndimage.grey_dilation(z.zone, size=(3, 3))
-            joins = []
-            for k in range(1, z.count + 1):
-                near = z.region[(grown == k) & (z.zone == 0)]
-                regions = np.unique(near[near > 0]).tolist()
-                joins.append([(r, ndimage.distance_transform_edt(z.region != r)) for r in regions])
-            self._joined = (z, joins)
-        return self._joined[1]
+    def _region_distance(self, region: int) -> np.ndarray:
+        """Distance (cells) from every cell of the zones' grid to ``region``, once per region."""
+        if region not in self._distance:
+            self._distance[region] = ndimage.distance_transform_edt(self.zones.region != region)
+        return self._distance[region]
