@@ -612,3 +612,41 @@ def test_potential_spreads_the_skids_beyond_the_packed_stacking_layout():
     plain, info = potential.spread(region, skids, start, relocations=0)
     full, info_full = potential.spread(region, skids, start)
     assert info_full["energy_final"] < info["energy_final"]
+
+
+def test_an_apron_by_the_opening_is_kept_free_when_the_skids_fit_so():
+    """Room by the opening (the supervisor asks for it): no spot within ``apron_m`` of the
+    opening while the skids fit; the paper's stacking puts the first skid right there."""
+    boundary = [[0, 0], [8, 0], [8, 6], [0, 6]]
+    opening = (0.0, 3.0)
+    plain = layout(boundary, [SKID] * 6, opening=opening)
+    assert "room_by_opening" not in plain.report
+    disc = shapely.Point(opening).buffer(2.0)
+    assert any(footprint_polygon(p, SKID).intersects(disc) for p in plain.poses)
+    res = layout(boundary, [SKID] * 6, opening=opening, apron_m=2.0)
+    assert res.report["room_by_opening"] == "apron"
+    independent_check(res, [SKID] * 6, boundary, 0.3)
+    assert not any(footprint_polygon(p, SKID).intersects(disc) for p in res.poses)
+
+
+def test_without_room_for_the_apron_the_room_left_over_lies_by_the_opening():
+    """One row of four slots for three skids: the apron does not fit, so the skids are
+    stacked from the far end and the free slot is the one by the opening (the paper's scan
+    leaves it at the far end); a full row stays as it was."""
+    row = [[0, 0], [6.3, 0], [6.3, 1.4], [0, 1.4]]  # 4 slots of 1.2 m + 0.3 m margins
+    near = layout(row, [SKID] * 3, opening=(0.0, 0.7))
+    far = layout(row, [SKID] * 3, opening=(0.0, 0.7), apron_m=2.0)
+    assert far.report["room_by_opening"] == "far corner"
+    independent_check(far, [SKID] * 3, row, 0.3)
+    assert min(far.poses[:, 0]) > min(near.poses[:, 0]) + 1.4  # one slot further in
+    assert max(far.poses[:, 0]) > max(near.poses[:, 0])
+    full = layout(row, [SKID] * 4, opening=(0.0, 0.7), apron_m=2.0)
+    np.testing.assert_allclose(
+        np.sort(full.poses[:, 0]), np.sort(layout(row, [SKID] * 4).poses[:, 0]), atol=1e-9
+    )
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), "wide"])
+def test_a_bad_apron_is_refused_with_its_value(bad):
+    with pytest.raises(LayoutError, match="park.apron_m"):
+        layout(SQUARE4, [SKID], opening=(0.0, 2.0), apron_m=bad)

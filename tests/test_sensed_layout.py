@@ -17,8 +17,10 @@ from swarmpark.supervisor.spot_watch import blocked_goals
 from swarmpark.world.build import build_world
 from swarmpark.world.scenario import ParkCmd, parse_scenario
 
-SEEN = [[4.6, 3.2], [5.6, 3.2], [5.6, 4.6], [4.6, 4.6]]  # 3 m ahead of the skids
-UNSEEN = [[12.0, 3.0], [13.0, 3.0], [13.0, 4.4], [12.0, 4.4]]  # 10 m away, beyond the 5 m LIDAR
+# Each where the layout puts a spot while it does not know the crate (the aprons it keeps
+# free by the opening, in front of the skids, hold no spot).
+SEEN = [[4.7, 1.0], [5.7, 1.0], [5.7, 2.4], [4.7, 2.4]]  # 3.3 m ahead of the skids
+UNSEEN = [[11.7, 1.0], [12.7, 1.0], [12.7, 2.4], [11.7, 2.4]]  # 10 m away, beyond the 5 m LIDAR
 NEAR_BOX = [[4.0, 1.0], [8.0, 1.0], [8.0, 7.0], [4.0, 7.0]]
 FAR_BOX = [[11.0, 1.0], [15.0, 1.0], [15.0, 7.0], [11.0, 7.0]]
 
@@ -75,7 +77,7 @@ def test_a_crate_the_scans_saw_before_the_park_gets_no_spot():
     assert not any(_on(out.detail["goals"], sup, SEEN))
     # The check of the spots runs on the same knowledge: the crate's face is in its grid.
     grid = sup.park_map.grid()
-    face = grid.world_to_cell(np.array([[4.62, 3.9]]))[0]
+    face = grid.world_to_cell(np.array([[4.72, 1.7]]))[0]
     assert grid.occupied[face[0], face[1]]
 
 
@@ -88,7 +90,7 @@ def test_a_crate_no_scan_saw_is_not_known_to_the_layout():
     _, _, lay = sup.plan_layout(ParkCmd(robots=["a1", "a2"], boundary=FAR_BOX))
     assert any(_on(lay.poses, sup, UNSEEN))
     grid = sup.park_map.grid()
-    inside = grid.world_to_cell(np.array([[12.5, 3.7]]))[0]
+    inside = grid.world_to_cell(np.array([[12.2, 1.7]]))[0]
     assert not grid.occupied[inside[0], inside[1]]
     # Without sensing the operator knows the scenario's obstacles, as before.
     truth = Supervisor(build_world(_scenario("truth")))
@@ -144,19 +146,19 @@ def test_a_goto_is_checked_on_the_known_map_not_the_scenarios_obstacles():
     scan has seen is not known (the goto is taken), the seen one is refused with the reason,
     and a refused goto leaves the skid on its previous order."""
     sup = Supervisor(build_world(_scenario(park_at=30.0)))
-    on_unseen = sup.command("goto", {"robot": "a2", "pose": [12.5, 3.7, 90]})
+    on_unseen = sup.command("goto", {"robot": "a2", "pose": [12.2, 1.7, 90]})
     assert on_unseen.accepted, on_unseen
     ok = sup.command("goto", {"robot": "a1", "pose": [3.0, 2.0, 0]})
     assert ok.accepted
-    before = sup.command("goto", {"robot": "a1", "pose": [5.1, 3.9, 90]})
+    before = sup.command("goto", {"robot": "a1", "pose": [5.2, 1.7, 90]})
     assert before.accepted  # no scan yet: the map alone does not show the crate
     sup.command("goto", {"robot": "a1", "pose": [3.0, 2.0, 0]})
     _run_until(sup, 1.0)
-    out = sup.command("goto", {"robot": "a1", "pose": [5.1, 3.9, 90]})
+    out = sup.command("goto", {"robot": "a1", "pose": [5.2, 1.7, 90]})
     assert not out.accepted
     assert out.reason == (
         "goto.pose: robot 'a1' would overlap a wall or a detected obstacle of the known map "
-        "at [5.1, 3.9, 90.0]"
+        "at [5.2, 1.7, 90.0]"
     )
     np.testing.assert_allclose(sup.goals[0], [3.0, 2.0, 0.0])
     wall = sup.command("goto", {"robot": "a1", "pose": [8.0, 7.5, 0]})

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+import shapely
 
 from swarmpark.core.geometry import Footprint, wrap_angle
 from swarmpark.layout.egress import default_opening, egress_order
@@ -21,6 +22,7 @@ from swarmpark.layout.region import (
     Region,
     Skids,
     _as_boundary,
+    _as_obstacles,
     centres_to_poses,
     make_region,
     make_skids,
@@ -117,6 +119,51 @@ def _solve(region: Region, skids: Skids, method: str) -> tuple[np.ndarray, dict]
     return get_method(method).solve(region, skids)
 
 
+def _apron(opening, apron_m):
+    """``(opening, disc)``: the opening (world ``(x, y)``) and the disc of radius ``apron_m``
+    around it kept free of spots; None without an opening or with no apron."""
+    try:
+        r = float(apron_m)
+    except (TypeError, ValueError) as exc:
+        raise LayoutError(f"park.apron_m: expected a number (got {apron_m!r})") from exc
+    if not (np.isfinite(r) and r >= 0.0):
+        raise LayoutError(f"park.apron_m: must be a finite number >= 0 (got {apron_m!r})")
+    if opening is None or r == 0.0:
+        return None
+    x, y = _parse_opening(opening)
+    return (x, y), shapely.Point(x, y).buffer(r)
+
+
+def _solve_apron(region, skids, method, inputs, apron):
+    """:func:`_solve`, leaving room by the opening (``apron``, from :func:`_apron`; None: the
+    method's layout as it is). First with the apron's disc kept free; if the skids do not
+    fit so, stacked from the corner away from the opening, so the room left over lies by it;
+    if they do not fit so either, as the method lays them out. ``inputs``: the boundary,
+    obstacles and margin ``region`` was made from. The centres are in ``region``'s frame."""
+    if apron is None or len(skids) < 2:
+        return _solve(region, skids, method)
+    (ox, oy), disc = apron
+    boundary, obstacles, margin_m = inputs
+    extra = [disc] if obstacles is None else [_as_obstacles(obstacles), disc]
+    tries = [("apron", lambda: make_region(boundary, extra, region.heading, margin_m))]
+    lx, ly = region.to_layout(np.array([ox, oy]))[0]
+    xmin, ymin, xmax, ymax = region.free.bounds
+    flip = (bool(lx < 0.5 * (xmin + xmax)), bool(ly < 0.5 * (ymin + ymax)))
+    tries.append(("far corner", lambda: replace(region, scan_flip=flip)))
+    for name, make in tries:
+        try:
+            centres, info = _solve(make(), skids, method)
+        except LayoutError as exc:
+            if exc.fits is None:
+                raise
+            continue
+        info["room_by_opening"] = name
+        return centres, info
+    centres, info = _solve(region, skids, method)
+    info["room_by_opening"] = "none"
+    return centres, info
+
+
 def _finish_checked(boundary_world, region, skids, centres, method, info, opening):
     """:func:`_finish`, falling back to the method's ``fallback`` (convex: stacking) when its
     solution fails validation.
@@ -211,6 +258,7 @@ def layout(
     margin_m: float = 0.3,
     obstacles=None,
     opening=None,
+    apron_m: float = 0.0,
 ) -> LayoutResult:
     """Goal poses for ``footprints`` inside ``boundary``.
 
@@ -235,6 +283,13 @@ def layout(
     opening
         ``(x, y)`` of the entrance used for the egress fill order; projected onto the
         boundary. Default: midpoint of the boundary's longest edge.
+    apron_m
+        With an ``opening``: leave room by it, so that skids coming in can turn there and the
+        first spots do not shut its mouth. The floor within this radius of the opening is
+        kept free of spots if the skids still fit so; else the skids are stacked from the
+        corner away from the opening (the room left over lies by it); else laid out as
+        without. ``report["room_by_opening"]`` says which (``apron``, ``far corner``,
+        ``none``). 0 (default): the method's layout as it is.
 
     Returns
     -------
@@ -259,9 +314,10 @@ def layout(
     get_method(method)  # an unknown name is refused before any work
     h = _parse_heading(heading)
     skids = make_skids(footprints)
+    apron = _apron(opening, apron_m)
     if h is not None:
         region = make_region(boundary, obstacles, h, margin_m)
-        centres, info = _solve(region, skids, method)
+        centres, info = _solve_apron(region, skids, method, (boundary, obstacles, margin_m), apron)
         return _finish_checked(boundary, region, skids, centres, method, info, opening)
 
     cands = candidate_headings(boundary)
@@ -274,7 +330,9 @@ def layout(
     tried = []
     for _, _, region in scored:
         try:
-            centres, info = _solve(region, skids, method)
+            centres, info = _solve_apron(
+                region, skids, method, (boundary, obstacles, margin_m), apron
+            )
         except LayoutError as exc:
             if exc.fits is None:
                 raise

@@ -90,6 +90,9 @@ class Region:
     margin_edge
         Distance of ``inner``'s straight edges from the free region's straight edges
         (equal to ``margin``).
+    scan_flip
+        Whether stacking scans each layout axis from its high end (``(x, y)``); set to
+        start at the corner away from the opening, so the room left over is by the opening.
     """
 
     heading: float
@@ -99,6 +102,7 @@ class Region:
     margin: float
     inner: BaseGeometry
     margin_edge: float
+    scan_flip: tuple[bool, bool] = (False, False)
 
     def to_layout(self, xy: np.ndarray) -> np.ndarray:
         """World points ``(N, 2)`` into the layout frame."""

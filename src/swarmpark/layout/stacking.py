@@ -4,7 +4,8 @@ The boundary is scanned from its left-most point along columns (x outer, y inner
 paper's ``stepX``/``stepY`` loops) and each skid takes the first candidate where its whole
 rectangle, grown by the margin, lies in the free region and keeps the margin from every
 skid placed before it. The paper's pseudo code tests only the centre point; here the whole
-footprint is tested.
+footprint is tested. With ``Region.scan_flip`` an axis is scanned from its high end instead
+(the supervisor's room by the opening, :func:`swarmpark.layout.api.layout` ``apron_m``).
 
 All candidates of one footprint size are tested at once (a lattice of centres, one
 vectorized shapely ``covers`` call against the eroded region); placing a skid then masks
@@ -64,13 +65,16 @@ def _lattice(region: Region, half: np.ndarray, order: str) -> tuple[np.ndarray, 
     m_edge, m = region.margin_edge, region.margin
     xmin, ymin, xmax, ymax = region.free.bounds
     axes = []
-    for lo, hi, h in ((xmin, xmax, a), (ymin, ymax, b)):
+    for lo, hi, h, flip in zip((xmin, ymin), (xmax, ymax), (a, b), region.scan_flip, strict=True):
         pitch = 2.0 * h + m
         k = max(STEPS_PER_PITCH, int(np.ceil(pitch / MAX_STEP_M)))
         step = pitch / k
-        start = lo + m_edge + h
-        count = int(np.floor((hi - m_edge - h - start) / step + 1e-9)) + 1
-        axes.append(start + step * np.arange(max(count, 0)))
+        start, end = lo + m_edge + h, hi - m_edge - h
+        count = max(int(np.floor((end - start) / step + 1e-9)) + 1, 0)
+        if flip:
+            axes.append(end - step * np.arange(count))
+        else:
+            axes.append(start + step * np.arange(count))
     xs, ys = axes
     if order == "columns":
         gx, gy = np.meshgrid(xs, ys, indexing="ij")

@@ -26,6 +26,7 @@ __all__ = [
     "build_costmap",
     "plan_path",
     "distance_field_from",
+    "nearest_by_path",
     "path_length",
     "shortcut",
 ]
@@ -300,6 +301,26 @@ def distance_field_from(
         return np.full(unit.shape, np.inf)
     cum, _ = MCP_Geometric(unit, fully_connected=True).find_costs([tuple(g)])
     return cum * grid.resolution_m
+
+
+def nearest_by_path(costmap: Costmap, starts_xy, points_xy) -> int | None:
+    """Index of the point of ``points_xy`` ``(P, 2)`` that a skid from any of ``starts_xy``
+    ``(S, 2)`` reaches by the shortest free-space path (one Dijkstra flood from every start at
+    once), or None if no start reaches any point."""
+    grid = costmap.grid
+    lethal = costmap.lethal()
+    rc = grid.world_to_cell(np.asarray(starts_xy, float).reshape(-1, 2))
+    rc = rc[grid.in_bounds(rc)]
+    rc = rc[~lethal[rc[:, 0], rc[:, 1]]]
+    if not len(rc):
+        return None
+    mcp = MCP_Geometric(np.where(lethal, np.inf, 1.0), fully_connected=True)
+    cum, _ = mcp.find_costs([tuple(c) for c in rc])
+    pc = grid.world_to_cell(np.asarray(points_xy, float).reshape(-1, 2))
+    inb = grid.in_bounds(pc)
+    d = np.full(len(pc), np.inf)
+    d[inb] = cum[pc[inb, 0], pc[inb, 1]]
+    return int(np.argmin(d)) if np.isfinite(d).any() else None
 
 
 def path_length_matrix(costmap: Costmap, starts_xy, goals_xy) -> np.ndarray:

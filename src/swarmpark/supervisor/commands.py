@@ -22,6 +22,7 @@ from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon, footprint_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
+from swarmpark.plan.grid import build_costmap, nearest_by_path
 from swarmpark.plan.spot_reach import as_report, spot_reach
 from swarmpark.supervisor import fill_order
 from swarmpark.supervisor.fill_order import Reach
@@ -158,9 +159,7 @@ class CommandsMixin:
         )
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.info.footprints[i] for i in idx]
-        # The skids enter from their side: the opening is the boundary point nearest to them.
-        centroid = Point(self.poses_known[idx, :2].mean(axis=0))
-        opening = nearest_points(boundary.exterior, centroid)[0]
+        opening = self._opening(idx, boundary, fps)
         lay = layout(
             boundary,
             fps,
@@ -168,9 +167,26 @@ class CommandsMixin:
             method=cmd.method,
             margin_m=cmd.margin_m,
             obstacles=self._known_solids(boundary),
-            opening=(opening.x, opening.y),
+            opening=opening,
+            # Room for a skid coming in to turn on the spot by the opening.
+            apron_m=2.0 * max(f.reach_m for f in fps),
         )
         return idx, boundary, lay
+
+    def _opening(self, idx: np.ndarray, boundary: Polygon, fps) -> tuple[float, float]:
+        """Where skids ``idx`` come into ``boundary``: the point of its edge the first of them
+        reaches by a free-space path on the known map (through the door, not at the side of
+        the boundary straight ahead of them behind a wall); without any path, the edge point
+        nearest to their centroid."""
+        half = min(f.width_m for f in fps) / 2.0
+        ring = boundary.exterior.segmentize(self.known_grid.resolution_m)
+        edge = np.asarray(ring.coords)[:-1]
+        costmap = build_costmap(self.known_grid, half, half)
+        k = nearest_by_path(costmap, self.poses_known[idx, :2], edge)
+        if k is not None:
+            return float(edge[k, 0]), float(edge[k, 1])
+        p = nearest_points(boundary.exterior, Point(self.poses_known[idx, :2].mean(axis=0)))[0]
+        return p.x, p.y
 
     @property
     def park_map(self) -> KnownMap:
