@@ -6,7 +6,7 @@ import pytest
 from shapely.geometry import LineString, box
 
 from swarmpark.core.gridmap import grid_from_walls
-from swarmpark.plan.grid import build_costmap, nearest_by_path, path_length, paths_from, plan_path
+from swarmpark.plan.grid import build_costmap, entry_points, path_length, paths_from, plan_path
 
 WALL = box(4, 0, 4.5, 4.5)
 
@@ -27,17 +27,16 @@ def test_path_goes_around_the_wall_with_clearance():
     assert len(path) < 20
 
 
-def test_the_edge_point_reached_first_is_over_the_wall_not_straight_ahead():
+def test_paths_into_an_area_arrive_where_the_wall_lets_them():
     """Skids west of the wall (open above y = 4.5) reach an area east of it over the top of
-    the wall first, not at the point of its edge straight ahead of them; a start outside the
-    map, or none, reaches nothing."""
+    the wall, not at the point of its edge straight ahead of them; a start outside the map
+    has no way in."""
     area = box(6, 0.5, 9, 5.5)
     edge = np.asarray(area.exterior.segmentize(0.05).coords)[:-1]
-    cm = build_costmap(grid(), 0.4, 0.4)
-    x, y = edge[nearest_by_path(cm, [(2.0, 1.0), (2.0, 2.5)], edge)]
-    assert x == pytest.approx(6.0) and 4.6 < y <= 5.5  # above the wall's top, not y 1 or 2.5
-    assert nearest_by_path(cm, [(20.0, 1.0)], edge) is None
-    assert nearest_by_path(cm, np.zeros((0, 2)), edge) is None
+    got = entry_points(build_costmap(grid(), 0.4, 0.4), [(2.0, 1.0), (2.0, 2.5), (20.0, 1.0)], edge)
+    for x, y in got[:2]:
+        assert x == pytest.approx(6.0) and 4.6 < y <= 5.5  # above the wall's top, not y 1 or 2.5
+    assert np.isnan(got[2]).all()
 
 
 def test_unreachable_goal_gives_none():

@@ -26,7 +26,7 @@ __all__ = [
     "build_costmap",
     "plan_path",
     "distance_field_from",
-    "nearest_by_path",
+    "entry_points",
     "path_length",
     "shortcut",
 ]
@@ -303,24 +303,38 @@ def distance_field_from(
     return cum * grid.resolution_m
 
 
-def nearest_by_path(costmap: Costmap, starts_xy, points_xy) -> int | None:
-    """Index of the point of ``points_xy`` ``(P, 2)`` that a skid from any of ``starts_xy``
-    ``(S, 2)`` reaches by the shortest free-space path (one Dijkstra flood from every start at
-    once), or None if no start reaches any point."""
+def entry_points(costmap: Costmap, starts_xy, points_xy) -> np.ndarray:
+    """For each start ``(S, 2)``: the point of ``points_xy`` ``(P, 2)`` (an area's edge) at
+    which its shortest free-space path into the area arrives, ``(S, 2)`` (NaN for a start
+    with no path). One Dijkstra flood from the points; every start's path is traced back to
+    the point it came from at once (a step per cell of the longest path)."""
     grid = costmap.grid
     lethal = costmap.lethal()
-    rc = grid.world_to_cell(np.asarray(starts_xy, float).reshape(-1, 2))
-    rc = rc[grid.in_bounds(rc)]
-    rc = rc[~lethal[rc[:, 0], rc[:, 1]]]
-    if not len(rc):
-        return None
+    starts = np.asarray(starts_xy, float).reshape(-1, 2)
+    out = np.full((len(starts), 2), np.nan)
+    pts = np.asarray(points_xy, float).reshape(-1, 2)
+    pc = grid.world_to_cell(pts)
+    ok = grid.in_bounds(pc)
+    ok[ok] = ~lethal[pc[ok, 0], pc[ok, 1]]
+    if not ok.any():
+        return out
     mcp = MCP_Geometric(np.where(lethal, np.inf, 1.0), fully_connected=True)
-    cum, _ = mcp.find_costs([tuple(c) for c in rc])
-    pc = grid.world_to_cell(np.asarray(points_xy, float).reshape(-1, 2))
-    inb = grid.in_bounds(pc)
-    d = np.full(len(pc), np.inf)
-    d[inb] = cum[pc[inb, 0], pc[inb, 1]]
-    return int(np.argmin(d)) if np.isfinite(d).any() else None
+    cum, back = mcp.find_costs([tuple(c) for c in pc[ok]])
+    point_at = np.full(lethal.shape, -1)
+    point_at[pc[ok, 0], pc[ok, 1]] = np.flatnonzero(ok)
+    rc = grid.world_to_cell(starts)
+    live = grid.in_bounds(rc)
+    live[live] = np.isfinite(cum[rc[live, 0], rc[live, 1]])
+    cur = rc[live].copy()
+    offsets = np.asarray(mcp.offsets)
+    while len(cur):
+        step = back[cur[:, 0], cur[:, 1]]
+        on = step >= 0  # -1 at the flood's sources
+        if not on.any():
+            break
+        cur[on] -= offsets[step[on]]
+    out[live] = pts[point_at[cur[:, 0], cur[:, 1]]]
+    return out
 
 
 def path_length_matrix(costmap: Costmap, starts_xy, goals_xy) -> np.ndarray:

@@ -22,7 +22,7 @@ from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon, footprint_polygon
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
-from swarmpark.plan.grid import build_costmap, nearest_by_path
+from swarmpark.plan.grid import build_costmap, entry_points
 from swarmpark.plan.spot_reach import as_report, spot_reach
 from swarmpark.supervisor import fill_order
 from swarmpark.supervisor.fill_order import Reach
@@ -174,18 +174,19 @@ class CommandsMixin:
         return idx, boundary, lay
 
     def _opening(self, idx: np.ndarray, boundary: Polygon, fps) -> tuple[float, float]:
-        """Where skids ``idx`` come into ``boundary``: the point of its edge the first of them
-        reaches by a free-space path on the known map (through the door, not at the side of
-        the boundary straight ahead of them behind a wall); without any path, the edge point
-        nearest to their centroid."""
+        """Where skids ``idx`` come into ``boundary``: the mean of the points at which their
+        shortest free-space paths on the known map reach its edge, brought back onto the
+        edge. Through a door they all come in at the door, not at the side of the boundary
+        straight ahead of them behind a wall. Without any path: the edge point nearest to
+        the skids' centroid."""
         half = min(f.width_m for f in fps) / 2.0
         ring = boundary.exterior.segmentize(self.known_grid.resolution_m)
         edge = np.asarray(ring.coords)[:-1]
         costmap = build_costmap(self.known_grid, half, half)
-        k = nearest_by_path(costmap, self.poses_known[idx, :2], edge)
-        if k is not None:
-            return float(edge[k, 0]), float(edge[k, 1])
-        p = nearest_points(boundary.exterior, Point(self.poses_known[idx, :2].mean(axis=0)))[0]
+        entries = entry_points(costmap, self.poses_known[idx, :2], edge)
+        found = np.isfinite(entries[:, 0])
+        aim = entries[found].mean(axis=0) if found.any() else self.poses_known[idx, :2].mean(0)
+        p = nearest_points(boundary.exterior, Point(aim))[0]
         return p.x, p.y
 
     @property
