@@ -26,6 +26,7 @@ from swarmpark.layout.region import (
     centres_to_poses,
     make_region,
     make_skids,
+    non_negative,
 )
 from swarmpark.layout.validate import check_layout
 
@@ -122,12 +123,7 @@ def _solve(region: Region, skids: Skids, method: str) -> tuple[np.ndarray, dict]
 def _apron(opening, apron_m):
     """``(opening, disc)``: the opening (world ``(x, y)``) and the disc of radius ``apron_m``
     around it kept free of spots; None without an opening or with no apron."""
-    try:
-        r = float(apron_m)
-    except (TypeError, ValueError) as exc:
-        raise LayoutError(f"park.apron_m: expected a number (got {apron_m!r})") from exc
-    if not (np.isfinite(r) and r >= 0.0):
-        raise LayoutError(f"park.apron_m: must be a finite number >= 0 (got {apron_m!r})")
+    r = non_negative(apron_m, "park.apron_m")
     if opening is None or r == 0.0:
         return None
     x, y = _parse_opening(opening)

@@ -26,6 +26,7 @@ __all__ = [
     "Skids",
     "make_region",
     "make_skids",
+    "non_negative",
     "rect_gaps",
     "centres_to_poses",
     "describe_skids",
@@ -216,6 +217,18 @@ def _as_obstacles(obstacles) -> BaseGeometry:
     return shapely.union_all(parts) if parts else shapely.Polygon()
 
 
+def non_negative(value, field: str) -> float:
+    """``value`` as a finite float >= 0; a :class:`LayoutError` naming ``field`` and the value
+    otherwise."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError) as exc:
+        raise LayoutError(f"{field}: expected a number (got {value!r})") from exc
+    if not (np.isfinite(x) and x >= 0.0):
+        raise LayoutError(f"{field}: must be a finite number >= 0 (got {value!r})")
+    return x
+
+
 def make_region(boundary, obstacles, heading: float, margin_m: float) -> Region:
     """Validate the boundary and obstacles and build the layout-frame :class:`Region`.
 
@@ -226,12 +239,7 @@ def make_region(boundary, obstacles, heading: float, margin_m: float) -> Region:
     LayoutError
         Bad margin or obstacle input, or nothing of the boundary is left free.
     """
-    try:
-        margin = float(margin_m)
-    except (TypeError, ValueError) as exc:
-        raise LayoutError(f"park.margin_m: expected a number (got {margin_m!r})") from exc
-    if not (np.isfinite(margin) and margin >= 0.0):
-        raise LayoutError(f"park.margin_m: must be a finite number >= 0 (got {margin_m!r})")
+    margin = non_negative(margin_m, "park.margin_m")
     shell, holes = _as_boundary(boundary)
     obst = _as_obstacles(obstacles)
     if holes:
