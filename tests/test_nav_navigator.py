@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import shapely
-from navkit import advance, make_view
+from navkit import FOOTPRINT, advance, make_view
 from shapely.geometry import box
 
 from swarmpark.control.nav import AVOIDANCE_MODES, Navigator, NavParams
@@ -14,7 +14,7 @@ from swarmpark.control.nav.hold import hold_outside
 from swarmpark.control.nav.params import DockingParams, HoldParams
 from swarmpark.control.nav.scene import Scene
 from swarmpark.control.orca.kernel import OrcaParams
-from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.geometry import footprint_corners, wrap_angle
 
 
 @pytest.mark.parametrize("mode", AVOIDANCE_MODES)
@@ -111,3 +111,35 @@ def test_a_skid_held_outside_its_boundary_waits_without_backing_up():
         view = advance(view, cmd, hold=np.array([True]), hold_zones=(zone,))
     assert min(speeds) >= 0.0 and nav.robots[0].stall.stalled_s == 0.0
     assert 0.0 < zone.exterior.distance(shapely.Point(view.poses[0, :2])) - 0.6 <= 1.1
+
+
+def test_a_held_skid_far_from_its_stop_drives_on_to_it():
+    # Skid 0 is held back by the fill order (its zone 4.9 m ahead) while skid 1 crosses its
+    # lane. Held is not waiting until it reaches its stop: it must not stand aside and stay
+    # there for the whole hold (a follower stood 21 m from its spot for 65 s on a generated
+    # corridor site). It drives on to its stop, 1 m short of the zone (plus the half second
+    # the hold looks ahead, at full speed), and waits there.
+    nav = Navigator()
+    zone = box(8.5, 2.0, 10.0, 4.0)
+    hold = np.array([True, False])
+    view = make_view(
+        [[3.0, 3.0, 0.0], [3.0, 5.3, -np.pi / 2]],
+        [[9.2, 3.0, 0.0], [3.0, 0.8, -np.pi / 2]],
+        goal_changed=[True, True],
+        dt=0.05,
+    )
+    view = replace(view, hold=hold, hold_zones=(zone, None))
+    nav.compute(view)
+    assert not nav.at_hold[0]  # on its way: not waiting yet
+    for _ in range(400):
+        cmd = nav.compute(view)
+        view = advance(view, cmd, hold=hold, hold_zones=(zone, None))
+    gap = shapely.Polygon(footprint_corners(view.poses[:1], FOOTPRINT.corners_body()[None])[0])
+    p = HoldParams()
+    assert p.gap_m <= gap.distance(zone) <= p.gap_m + 0.5 * p.lookahead_s + 0.05
+    assert nav.at_hold[0] and not nav.at_hold[1]
+    assert np.hypot(*(view.poses[1, :2] - [3.0, 0.8])) < 0.1  # the crossing skid parked
+    # The hold ends: it is no longer waiting, and drives in.
+    view = replace(view, hold=np.array([False, False]))
+    nav.compute(view)
+    assert not nav.at_hold.any()

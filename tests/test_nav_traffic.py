@@ -95,3 +95,35 @@ def test_a_skid_standing_in_the_zone_comes_from_the_side_its_path_leads_away_fro
     east = tc.zones.region_at(np.array([[9.5, 3.0]]))[0]
     assert states[1].zone == 1 and states[1].side == east > 0
     assert states[0].zone == 0 and states[0].waiting == 1
+
+
+def test_a_skid_the_fill_order_holds_back_gets_no_grant_and_the_next_one_goes():
+    # Skid 0 is first in the queue for the door but held back by the fill order: it would
+    # wait in the door. It gets no grant and stops short; skid 1 behind it goes first.
+    view, paths = _setup([[1.6, 3.0, 0.0], [0.7, 3.0, 0.0]], [[8.0, 3.5, 0.0], [9.0, 3.0, 0.0]])
+    view = replace(view, hold=np.array([True, False]), hold_zones=(None, None))
+    tc = TrafficControl(TrafficParams())
+    states = [TrafficState(), TrafficState()]
+    waiting = tc.step(
+        view,
+        np.arange(2),
+        np.zeros((2, 2)),
+        paths,
+        PathFollower(FollowerParams()),
+        states,
+        np.zeros(2, bool),
+    )
+    assert states[0].zone == 0 and states[0].waiting == 1 and waiting[0]
+    assert states[1].zone == 1 and states[1].waiting == 0 and not waiting[1]
+    # Released by the fill order, it gets the door in its turn (behind the convoy's gap).
+    later = replace(view, t=10.0, hold=np.array([False, False]))
+    tc.step(
+        later,
+        np.arange(2),
+        np.zeros((2, 2)),
+        paths,
+        PathFollower(FollowerParams()),
+        states,
+        np.zeros(2, bool),
+    )
+    assert states[0].zone == 1

@@ -114,6 +114,10 @@ class Navigator:
         self.making_room = np.zeros(0, dtype=bool)
         #: (N,) skids waiting for a bottleneck this tick (queued on purpose; not deadlocked).
         self.queued = np.zeros(0, dtype=bool)
+        #: (N,) skids the fill order holds back that have come to where it stops them (near
+        #: their boundary, or their own spot when following a skid bound deeper); kept while
+        #: the hold lasts. Only these wait on purpose: a held skid farther out is on its way.
+        self.at_hold = np.zeros(0, dtype=bool)
 
     @property
     def recoveries(self) -> list[dict]:
@@ -240,7 +244,7 @@ class Navigator:
             full[idx] = raw
             self._guard_aside(view, idx[aside], full, cmd)
         self.manoeuvre.observe(view, idx, man_states, raw, cmd[idx])
-        held = hold_outside(view, idx, cmd, p.hold)
+        held = self._hold(view, idx, cmd)
         self.queued = np.zeros(n, dtype=bool)
         if p.traffic.enabled:
             self.queued[idx] = self.traffic.step(
@@ -251,7 +255,7 @@ class Navigator:
         # does not back up (it backed 0.5 m out of the queue and drove back, 4-5 s lost each
         # time, on a generated elevator site).
         robots = [self.robots[i] for i in idx]
-        paused = (held | self.queued[idx]).tolist()
+        paused = ((held & self.at_hold[idx]) | self.queued[idx]).tolist()
         StallWatch.update_all(
             p.stall,
             [r.stall for r in robots],
@@ -338,6 +342,22 @@ class Navigator:
         )
         return full[idx]
 
+    def _hold(self, view: ControlView, idx: np.ndarray, cmd: np.ndarray):
+        """The fill order's holds (:func:`.hold.hold_outside`, in place on ``cmd``): which of
+        ``idx`` are held outside. Updates
+        :attr:`at_hold`: a skid counts as waiting from when it first reaches its stop until
+        the hold ends (a follower held short of its spot stood still 21 m from it, its clock
+        stopped, for 65 s on a generated corridor site, taken for waiting)."""
+        n = len(view.poses)
+        held, at_stop = hold_outside(view, idx, cmd, self.params.hold)
+        reached = np.zeros(n, dtype=bool)
+        reached[idx[at_stop]] = True
+        if len(self.at_hold) == n:
+            reached |= self.at_hold
+        hold = np.zeros(n, dtype=bool) if view.hold is None else view.hold
+        self.at_hold = reached & hold
+        return held
+
     def _make_room(
         self, view: ControlView, idx: np.ndarray, raw: np.ndarray, waiting: np.ndarray
     ) -> np.ndarray:
@@ -406,8 +426,8 @@ class Navigator:
         held = np.array([r.stall.stalled_s for r in self.robots]) >= self.params.fleet_map.still_s
         bound = view.active & ~settled
         waiting = np.array([r.traffic.waiting > 0 for r in self.robots], dtype=bool)
-        if view.hold is not None:
-            waiting |= view.hold
+        if view.hold is not None and len(self.at_hold) == len(waiting):
+            waiting |= view.hold & self.at_hold
         return FleetState(parked=parked, bound=bound, still=bound & held, waiting=waiting)
 
     def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:

@@ -116,8 +116,14 @@ class TrafficControl:
             if st.zone or ahead[0] == 0 or parked[i]:
                 continue
             asks.setdefault(ahead[0], []).append((ahead[1], i, ahead[2]))
+        held = np.zeros(len(view.poses), dtype=bool) if view.hold is None else view.hold
         for zone, queue in asks.items():
             for _dist, i, side in sorted(queue):
+                if held[i]:
+                    # Held back by the fill order: no grant (it would wait in the door), and
+                    # the skids behind it, maybe the one it waits for, go ahead of it.
+                    states[i].waiting = zone
+                    continue
                 if self._grant(view, zone, side, states, p):
                     st = states[i]
                     st.zone, st.side, st.since = zone, side, view.t
