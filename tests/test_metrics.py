@@ -1,12 +1,16 @@
 """Metrics on tiny scripted runs whose numbers can be checked by hand."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import Scripted, make_world
 
 from swarmpark.apps.cli import _print_table
 from swarmpark.apps.run import run_world
-from swarmpark.metrics import lower_bound_s
+from swarmpark.metrics import LOST_TIME, lower_bound_s
+
+SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
 
 def straight_run(**kw):
@@ -143,3 +147,30 @@ def test_lower_bound_is_computed_lazily_from_the_first_park_command_with_one():
     assert expected is not None and rec.lower_bound == expected
     rec.defer_lower_bound(world.grid, starts, goals, 0.4, np.array([5.0]))
     assert rec.lower_bound == expected  # the first bound found stays
+
+
+def test_time_lost_against_top_speed_by_hand():
+    # The straight run above: 20 steps speeding up (losing dt * (1 - v / 0.5) each:
+    # 0.05 * (20 - 0.05 * 210) = 0.475 s), then full speed, then slowing down until it is
+    # within tolerance at step 87 (steps 81-86 lose 0.05 * 0.05 * (1 + ... + 6) = 0.0525 s).
+    # All of it within 2 m of its goal: parking.
+    r = straight_run().result
+    assert r["time_lost_s"]["parking"] == pytest.approx(0.5275, abs=1e-3)
+    assert sum(r["time_lost_s"].values()) == pytest.approx(0.5275, abs=1e-3)
+    assert r["robots"]["a"]["time_lost_s"] == {"parking": pytest.approx(0.5275, abs=1e-3)}
+
+
+def test_time_lost_adds_up_and_names_the_fill_order():
+    # A convoy into a dead end: the skids bound for the spots nearer the mouth wait for the
+    # deeper ones. Each skid's time lost is its time to park less its path at top speed.
+    from swarmpark.world.scenario import build_world, load_scenario
+
+    world = build_world(load_scenario(SCENARIOS / "dead-end-fig6.yaml"))
+    r = run_world(world).result
+    assert r["success"]
+    vmax = world.scenario.robot_defaults.max_speed_mps
+    for rid, s in r["robots"].items():
+        expected = s["parked_at_s"] - s["path_length_m"] / vmax
+        assert sum(s["time_lost_s"].values()) == pytest.approx(expected, abs=0.3), rid
+    assert r["time_lost_s"]["fill_order"] > 2.0
+    assert set(r["time_lost_s"]) == set(LOST_TIME)

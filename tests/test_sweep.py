@@ -118,6 +118,10 @@ def test_twelve_job_sweep_writes_table_and_summary_and_resumes(tmp_path, tiny):
     summary = (out / "summary.md").read_text()
     assert "## per kind" in summary and "## per param.navigation.avoidance" in summary
     assert (out / "success.png").stat().st_size > 0
+    # Where the time went, per kind: every skid of these 2 s runs lost some.
+    assert "## time lost per skid (s)" in summary and (out / "time_lost.png").stat().st_size > 0
+    lost = df[[c for c in df.columns if c.startswith("time_lost_s.")]].sum(axis=1)
+    assert (lost > 0).all()
     # The tiny goto (2 m at 0.5 m/s) does not finish in 2 s: every tiny run is not parked.
     assert not df.loc[df["kind"] == "tiny", "success"].any()
 

@@ -11,8 +11,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from swarmpark.assign import AssignmentError, bottleneck_assignment
+from swarmpark.control.base import ACTIVITIES
 from swarmpark.core.geometry import point_segment_distance, wrap_angle
 from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.core.progress import (
@@ -28,6 +30,7 @@ __all__ = [
     "POSITION_TOL_M",
     "HEADING_TOL_RAD",
     "DEADLOCK_WINDOW_S",
+    "LOST_TIME",
     "MetricsRecorder",
     "lower_bound_s",
 ]
@@ -40,6 +43,15 @@ DEADLOCK_WINDOW_S = 10.0
 #: arm (m per rad), fell by at least this much below its best so far.
 HEADING_LEVER_M = REPORT_HEADING_LEVER_M
 PROGRESS_M = REPORT_PROGRESS_M
+#: What the time a robot loses against its top speed on the way to its goal is put down
+#: to (the run result's ``time_lost_s``): the controller's activities
+#: (:data:`~swarmpark.control.base.ACTIVITIES`: held by the fill order, queued at a
+#: bottleneck, manoeuvring, held by the collision monitor, making room) and otherwise
+#: ``parking`` within :data:`LOST_NEAR_M` of its goal, ``in_traffic`` with another robot
+#: within :data:`LOST_NEAR_M`, else ``driving`` (turning, accelerating, a curve).
+LOST_TIME = (*ACTIVITIES, "parking", "in_traffic")
+_LOST = {name: k for k, name in enumerate(LOST_TIME)}
+LOST_NEAR_M = 2.0
 #: Above this many goals the lower bound uses straight-line distances (no Dijkstra runs).
 LOWER_BOUND_PATH_GOALS = 30
 #: Largest ratio of an 8-connected grid path length to the Euclidean length it stands for.
@@ -106,6 +118,8 @@ class MetricsRecorder:
     #: What holds robot ``i`` up, asked when a deadlock is reported (the supervisor sets it
     #: from the controller); None: the cause is not reported.
     explain: Callable[[int], str] | None = None
+    #: ``(N,)`` each robot's top speed (m/s), for the time lost against it; None: not kept.
+    max_speed_mps: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.ids)
@@ -128,6 +142,8 @@ class MetricsRecorder:
         # distance of the robot from it since (the detour it took).
         self._leg = np.repeat(self._prev[:, None, :2], 2, axis=1)
         self._lateral = np.zeros(n)
+        self._t = 0.0
+        self._lost = np.zeros((n, len(LOST_TIME)))
 
     def defer_lower_bound(
         self,
@@ -196,9 +212,13 @@ class MetricsRecorder:
         has_goal: np.ndarray,
         paused: np.ndarray,
         step,
+        activity: np.ndarray | None = None,
     ) -> None:
-        """Record the state after one step (``paused``: stopped or e-stopped robots)."""
-        self.path_length += np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
+        """Record the state after one step (``paused``: stopped or e-stopped robots;
+        ``activity``: what the controller had each robot do, codes into
+        :data:`~swarmpark.control.base.ACTIVITIES`)."""
+        moved = np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
+        self.path_length += moved
         off_leg = point_segment_distance(poses[:, :2], self._leg[:, 0], self._leg[:, 1])
         self._lateral = np.maximum(self._lateral, off_leg)
         self._prev = poses.copy()
@@ -219,6 +239,7 @@ class MetricsRecorder:
         newly = inside & np.isnan(self._entered)
         self._entered[newly] = t
         self._entered[~inside] = np.nan
+        self._lose_time(t, poses, moved, has_goal & ~inside, pos_err, activity)
 
         # Deadlocks: an unreached goal and no progress for DEADLOCK_WINDOW_S.
         remaining = remaining_m(pos_err, head_err, HEADING_LEVER_M)
@@ -250,6 +271,32 @@ class MetricsRecorder:
     def moved_by_hand(self, i: int, pose: np.ndarray) -> None:
         """Robot ``i`` was carried to ``pose``: the jump is not driven path length."""
         self._prev[i] = np.asarray(pose, float)
+
+    def _lose_time(self, t, poses, moved, going, pos_err, activity) -> None:
+        """Add each robot ``going`` to its goal's time lost this step against its top speed,
+        ``dt * (1 - speed / top speed)``, to what it was doing (:data:`LOST_TIME`)."""
+        dt, self._t = t - self._t, t
+        if self.max_speed_mps is None or dt <= 0.0 or not going.any():
+            return
+        rows = np.flatnonzero(going)
+        speed = moved[rows] / dt
+        lost = dt * (1.0 - np.clip(speed / self.max_speed_mps[rows], 0.0, 1.0))
+        cat = np.zeros(len(rows), dtype=int)  # driving
+        tree = cKDTree(poses[:, :2])
+        near = tree.query_ball_point(poses[rows, :2], LOST_NEAR_M, return_length=True) > 1
+        cat[near] = _LOST["in_traffic"]
+        cat[pos_err[rows] < LOST_NEAR_M] = _LOST["parking"]
+        if activity is not None:
+            act = np.asarray(activity)[rows]
+            mine = act > 0
+            cat[mine] = [_LOST[ACTIVITIES[a]] for a in act[mine]]
+        np.add.at(self._lost, (rows, cat), lost)
+
+    @property
+    def time_lost(self) -> dict[str, float]:
+        """Seconds lost against top speed by all robots together, per :data:`LOST_TIME`."""
+        total = self._lost.sum(axis=0)
+        return {name: round(float(v), 3) for name, v in zip(LOST_TIME, total, strict=True)}
 
     def stuck(self) -> np.ndarray:
         """Robots currently in a deadlock."""
@@ -294,6 +341,12 @@ class MetricsRecorder:
                 else None,
                 "final_pose": _pose_deg(poses[i]),
             }
+            if self.max_speed_mps is not None and cmd[i]:
+                robots[rid]["time_lost_s"] = {
+                    name: round(float(v), 3)
+                    for name, v in zip(LOST_TIME, self._lost[i], strict=True)
+                    if v > 0.0
+                }
         ticks = np.asarray(self.tick_ms) if self.tick_ms else np.zeros(1)
         return {
             "success": bool(success),
@@ -310,6 +363,7 @@ class MetricsRecorder:
             "path_length_m": {rid: robots[rid]["path_length_m"] for rid in self.ids},
             "deadlocks": [d.as_dict() for d in self.deadlocks],
             "unreachable_spots": self.unreachable_spots,
+            "time_lost_s": self.time_lost if self.max_speed_mps is not None else None,
             "tick_ms": {
                 "mean": round(float(ticks.mean()), 4),
                 "p99": round(float(np.percentile(ticks, 99)), 4),

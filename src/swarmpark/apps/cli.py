@@ -36,6 +36,14 @@ def _fmt(v) -> str:
     return "-" if v is None else (f"{v:.3f}" if isinstance(v, float) else str(v))
 
 
+def _lost(lost: dict | None) -> str:
+    """The run's time lost against top speed, largest first (``-`` if not recorded)."""
+    if not lost:
+        return "-"
+    top = sorted(((v, k) for k, v in lost.items() if v > 0), reverse=True)
+    return ", ".join(f"{k} {v:.1f}" for v, k in top) or "0"
+
+
 def _print_table(result: dict) -> None:
     r = result
     lines = [
@@ -46,6 +54,7 @@ def _print_table(result: dict) -> None:
         f"min_clearance_m {_fmt(r['min_clearance_m'])}   (robot {_fmt(r['min_clearance_robot_m'])},"
         f" wall {_fmt(r['min_clearance_wall_m'])})",
         f"deadlocks       {len(r['deadlocks'])}",
+        f"time_lost_s     {_lost(r.get('time_lost_s'))}",
         f"tick_ms         mean {r['tick_ms']['mean']:.3f}, p99 {r['tick_ms']['p99']:.3f}",
         f"sim_time_s      {r['sim_time_s']}",
         "",

@@ -129,6 +129,23 @@ def summarize(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
     return tables
 
 
+def time_lost(df: pd.DataFrame) -> pd.DataFrame | None:
+    """Seconds each skid lost against its top speed on the way to its goal, by what it was
+    doing (the results' ``time_lost_s``), averaged over the skids of each kind's runs; None
+    if no result has them."""
+    cols = [c for c in df.columns if c.startswith("time_lost_s.")]
+    if not cols or "n_robots" not in df or "kind" not in df:
+        return None
+    ok = df[df[cols].notna().all(axis=1) & (df["n_robots"] > 0)]
+    if ok.empty:
+        return None
+    rows = []
+    for kind, g in ok.groupby("kind", sort=True):
+        per_skid = g[cols].sum() / g["n_robots"].sum()
+        rows.append({"kind": kind, **{c.split(".", 1)[1]: float(v) for c, v in per_skid.items()}})
+    return pd.DataFrame(rows)
+
+
 def _cell(v) -> str:
     if v is None or (isinstance(v, float) and np.isnan(v)):
         return "-"
@@ -179,6 +196,29 @@ def _plots(df: pd.DataFrame, tables: dict, out_dir: Path) -> list[Path]:
     return paths
 
 
+def _lost_plot(lost: pd.DataFrame, out_dir: Path) -> Path:
+    """A stacked bar per kind of :func:`time_lost`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cats = [c for c in lost.columns if c != "kind"]
+    fig, ax = plt.subplots(figsize=(1.2 * len(lost) + 4, 3.6))
+    bottom = np.zeros(len(lost))
+    for c in cats:
+        ax.bar(lost["kind"].astype(str), lost[c], bottom=bottom, label=c)
+        bottom += lost[c].to_numpy()
+    ax.set_ylabel("time lost per skid (s)")
+    ax.tick_params(axis="x", rotation=45)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.tight_layout()
+    path = out_dir / "time_lost.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
 def write_report(out_dir: Path, job_ids: list[str], name: str) -> dict:
     """Write ``results.parquet``, ``summary.md`` and plots; return the tables and paths."""
     df = records_table(out_dir, job_ids)
@@ -194,7 +234,15 @@ def write_report(out_dir: Path, job_ids: list[str], name: str) -> dict:
         md += [
             f"- `{r.job_id}`: {str(r.error).splitlines()[-1][:300]}\n" for r in errors.itertuples()
         ]
+    lost = time_lost(df) if not df.empty else None
+    if lost is not None:
+        md += [
+            "\n## time lost per skid (s) against top speed, by what it was doing\n\n",
+            markdown(lost),
+        ]
     plots = _plots(df, tables, out_dir) if tables else []
+    if lost is not None:
+        plots.append(_lost_plot(lost, out_dir))
     md += [f"\n![{p.stem}]({p.name})\n" for p in plots]
     summary = out_dir / "summary.md"
     summary.write_text("".join(md))

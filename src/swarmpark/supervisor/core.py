@@ -153,6 +153,7 @@ class Supervisor(CommandsMixin):
         self._sent = np.zeros((n, 2))
         self.metrics = MetricsRecorder(self.ids, self.truth_poses().copy())
         self.metrics.explain = self._explain
+        self.metrics.max_speed_mps = np.asarray(self.info.max_speed_mps, float)
         self._pending = sorted(
             enumerate(world.scenario.commands), key=lambda kv: (kv[1].at_s, kv[0])
         )
@@ -416,7 +417,12 @@ class Supervisor(CommandsMixin):
             aside = getattr(self.controller, name, None)
             if aside is not None and len(aside) == self.n:
                 paused = paused | aside
-        self.metrics.on_step(self.t, self.truth_poses(), self.goals, self.has_goal, paused, step)
+        activity = getattr(self.controller, "activity", None)
+        if activity is not None and len(activity) != self.n:
+            activity = None
+        self.metrics.on_step(
+            self.t, self.truth_poses(), self.goals, self.has_goal, paused, step, activity
+        )
         return step
 
     def _check_health(self) -> None:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from swarmpark.control.base import ControlView
+from swarmpark.control.base import ACTIVITIES, ControlView
 from swarmpark.control.nav.avoidance import AvoidanceInput, OrcaAdapter
 from swarmpark.control.nav.docking import Docking, DockState
 from swarmpark.control.nav.field import PotentialField
@@ -118,6 +118,9 @@ class Navigator:
         #: their boundary, or their own spot when following a skid bound deeper); kept while
         #: the hold lasts. Only these wait on purpose: a held skid farther out is on its way.
         self.at_hold = np.zeros(0, dtype=bool)
+        #: (N,) what each skid did on purpose this tick (codes into
+        #: :data:`swarmpark.control.base.ACTIVITIES`), for the run result's lost time.
+        self.activity = np.zeros(0, dtype=np.int8)
 
     @property
     def recoveries(self) -> list[dict]:
@@ -263,7 +266,25 @@ class Navigator:
             [r.dock.docked or w for r, w in zip(robots, paused, strict=True)],
             view.dt,
         )
+        self._activity(n, idx, held & self.at_hold[idx])
         return cmd
+
+    def _activity(self, n: int, idx: np.ndarray, held: np.ndarray) -> None:
+        """Fill :attr:`activity` for skids ``idx`` (``held``: waiting for the fill order),
+        the first that applies of :data:`~swarmpark.control.base.ACTIVITIES`."""
+        act = np.zeros(n, dtype=np.int8)
+        code = {name: k for k, name in enumerate(ACTIVITIES)}
+        rows = [
+            ("making_room", self.making_room[idx] if len(self.making_room) == n else None),
+            ("monitor", np.array([self.robots[i].stall.stalled_s > 0 for i in idx], bool)),
+            ("manoeuvring", np.array([self.robots[i].manoeuvre.running() for i in idx], bool)),
+            ("queued", self.queued[idx]),
+            ("fill_order", held),
+        ]
+        for name, mask in rows:  # the later ones take precedence
+            if mask is not None and mask.any():
+                act[idx[mask]] = code[name]
+        self.activity = act
 
     def explain(self, i: int) -> tuple[str, list[int]]:
         """Why skid ``i`` is not getting anywhere, as far as navigation knows (for deadlock
