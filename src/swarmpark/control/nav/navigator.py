@@ -68,6 +68,10 @@ class RobotNav:
     traffic: TrafficState = field(default_factory=TrafficState)
 
 
+#: Each activity's code in :attr:`Navigator.activity`.
+_ACTIVITY = {name: k for k, name in enumerate(ACTIVITIES)}
+
+
 class Navigator:
     """The default controller: plan, follow with the potential field, dock, avoid, recover.
 
@@ -270,10 +274,10 @@ class Navigator:
         return cmd
 
     def _activity(self, n: int, idx: np.ndarray, held: np.ndarray) -> None:
-        """Fill :attr:`activity` for skids ``idx`` (``held``: waiting for the fill order),
-        the first that applies of :data:`~swarmpark.control.base.ACTIVITIES`."""
+        """Fill :attr:`activity` for skids ``idx`` (``held``: waiting for the fill order):
+        of :data:`~swarmpark.control.base.ACTIVITIES` the first that applies of waiting for
+        the fill order, queued, manoeuvring, held by the monitor, making room."""
         act = np.zeros(n, dtype=np.int8)
-        code = {name: k for k, name in enumerate(ACTIVITIES)}
         rows = [
             ("making_room", self.making_room[idx] if len(self.making_room) == n else None),
             ("monitor", np.array([self.robots[i].stall.stalled_s > 0 for i in idx], bool)),
@@ -283,7 +287,7 @@ class Navigator:
         ]
         for name, mask in rows:  # the later ones take precedence
             if mask is not None and mask.any():
-                act[idx[mask]] = code[name]
+                act[idx[mask]] = _ACTIVITY[name]
         self.activity = act
 
     def explain(self, i: int) -> tuple[str, list[int]]:
@@ -365,10 +369,10 @@ class Navigator:
 
     def _hold(self, view: ControlView, idx: np.ndarray, cmd: np.ndarray):
         """The fill order's holds (:func:`.hold.hold_outside`, in place on ``cmd``): which of
-        ``idx`` are held outside. Updates
-        :attr:`at_hold`: a skid counts as waiting from when it first reaches its stop until
-        the hold ends (a follower held short of its spot stood still 21 m from it, its clock
-        stopped, for 65 s on a generated corridor site, taken for waiting)."""
+        ``idx`` are held outside. Updates :attr:`at_hold`: a skid counts as waiting from when
+        it first reaches its stop until the hold ends (a follower held short of its spot
+        stood still 21 m from it, its clock stopped, for 65 s on a generated corridor site,
+        taken for waiting)."""
         n = len(view.poses)
         held, at_stop = hold_outside(view, idx, cmd, self.params.hold)
         reached = np.zeros(n, dtype=bool)
