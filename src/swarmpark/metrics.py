@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from swarmpark.assign import AssignmentError, bottleneck_assignment
-from swarmpark.control.base import ACTIVITIES
+from swarmpark.core.activity import ACTIVITIES
 from swarmpark.core.geometry import point_segment_distance, wrap_angle
 from swarmpark.core.gridmap import OccupancyGrid
 from swarmpark.core.progress import (
@@ -45,7 +45,7 @@ HEADING_LEVER_M = REPORT_HEADING_LEVER_M
 PROGRESS_M = REPORT_PROGRESS_M
 #: What the time a robot loses against its top speed on the way to its goal is put down
 #: to (the run result's ``time_lost_s``): the controller's activities
-#: (:data:`~swarmpark.control.base.ACTIVITIES`: held by the fill order, queued at a
+#: (:data:`~swarmpark.core.activity.ACTIVITIES`: held by the fill order, queued at a
 #: bottleneck, manoeuvring, held by the collision monitor, making room) and otherwise
 #: ``parking`` within :data:`LOST_NEAR_M` of its goal, ``in_traffic`` with another robot
 #: within :data:`LOST_NEAR_M`, else ``driving`` (turning, accelerating, a curve).
@@ -216,7 +216,7 @@ class MetricsRecorder:
     ) -> None:
         """Record the state after one step (``paused``: stopped or e-stopped robots;
         ``activity``: what the controller had each robot do, codes into
-        :data:`~swarmpark.control.base.ACTIVITIES`)."""
+        :data:`~swarmpark.core.activity.ACTIVITIES`)."""
         moved = np.linalg.norm(poses[:, :2] - self._prev[:, :2], axis=1)
         self.path_length += moved
         off_leg = point_segment_distance(poses[:, :2], self._leg[:, 0], self._leg[:, 1])

@@ -15,20 +15,7 @@ import numpy as np
 from swarmpark.core.geometry import Footprint
 from swarmpark.core.gridmap import OccupancyGrid
 
-__all__ = ["ACTIVITIES", "ControlView", "Controller"]
-
-#: What a controller may report each skid doing on purpose this tick (``activity``, codes
-#: into this tuple; 0: nothing in particular, it drives). The run result adds up the time
-#: each skid loses against its full speed under these and two the recorder tells itself,
-#: ``parking`` (within 2 m of its goal) and ``in_traffic`` (another skid within 2 m).
-ACTIVITIES = (
-    "driving",
-    "fill_order",  # held back by the fill order, standing at its stop
-    "queued",  # waiting for its turn at a bottleneck
-    "manoeuvring",  # driving a planned manoeuvre
-    "monitor",  # held still by the collision monitor
-    "making_room",  # standing aside for another skid
-)
+__all__ = ["ControlView", "Controller"]
 
 
 @dataclass(frozen=True)

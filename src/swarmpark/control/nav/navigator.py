@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from swarmpark.control.base import ACTIVITIES, ControlView
+from swarmpark.control.base import ControlView
 from swarmpark.control.nav.avoidance import AvoidanceInput, OrcaAdapter
 from swarmpark.control.nav.docking import Docking, DockState
 from swarmpark.control.nav.field import PotentialField
@@ -49,6 +49,7 @@ from swarmpark.control.nav.recovery import (
 )
 from swarmpark.control.nav.scene import Scene
 from swarmpark.control.nav.traffic import TrafficControl, TrafficState
+from swarmpark.core.activity import ACTIVITIES
 
 __all__ = ["NavParams", "Navigator", "RobotNav"]
 
@@ -123,7 +124,7 @@ class Navigator:
         #: the hold lasts. Only these wait on purpose: a held skid farther out is on its way.
         self.at_hold = np.zeros(0, dtype=bool)
         #: (N,) what each skid did on purpose this tick (codes into
-        #: :data:`swarmpark.control.base.ACTIVITIES`), for the run result's lost time.
+        #: :data:`swarmpark.core.activity.ACTIVITIES`), for the run result's lost time.
         self.activity = np.zeros(0, dtype=np.int8)
 
     @property
@@ -275,7 +276,7 @@ class Navigator:
 
     def _activity(self, n: int, idx: np.ndarray, held: np.ndarray) -> None:
         """Fill :attr:`activity` for skids ``idx`` (``held``: waiting for the fill order):
-        of :data:`~swarmpark.control.base.ACTIVITIES` the first that applies of waiting for
+        of :data:`~swarmpark.core.activity.ACTIVITIES` the first that applies of waiting for
         the fill order, queued, manoeuvring, held by the monitor, making room."""
         act = np.zeros(n, dtype=np.int8)
         rows = [
