@@ -104,26 +104,14 @@ def test_a_skid_the_fill_order_holds_back_gets_no_grant_and_the_next_one_goes():
     view = replace(view, hold=np.array([True, False]), hold_zones=(None, None))
     tc = TrafficControl(TrafficParams())
     states = [TrafficState(), TrafficState()]
-    waiting = tc.step(
-        view,
-        np.arange(2),
-        np.zeros((2, 2)),
-        paths,
-        PathFollower(FollowerParams()),
-        states,
-        np.zeros(2, bool),
-    )
+
+    def step(v):
+        fol = PathFollower(FollowerParams())
+        return tc.step(v, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool))
+
+    waiting = step(view)
     assert states[0].zone == 0 and states[0].waiting == 1 and waiting[0]
     assert states[1].zone == 1 and states[1].waiting == 0 and not waiting[1]
     # Released by the fill order, it gets the door in its turn (behind the convoy's gap).
-    later = replace(view, t=10.0, hold=np.array([False, False]))
-    tc.step(
-        later,
-        np.arange(2),
-        np.zeros((2, 2)),
-        paths,
-        PathFollower(FollowerParams()),
-        states,
-        np.zeros(2, bool),
-    )
+    step(replace(view, t=10.0, hold=np.array([False, False])))
     assert states[0].zone == 1

@@ -263,7 +263,8 @@ class Navigator:
         # does not back up (it backed 0.5 m out of the queue and drove back, 4-5 s lost each
         # time, on a generated elevator site).
         robots = [self.robots[i] for i in idx]
-        paused = ((held & self.at_hold[idx]) | self.queued[idx]).tolist()
+        waits = held & self.at_hold[idx]  # standing at its stop for the fill order
+        paused = (waits | self.queued[idx]).tolist()
         StallWatch.update_all(
             p.stall,
             [r.stall for r in robots],
@@ -271,7 +272,7 @@ class Navigator:
             [r.dock.docked or w for r, w in zip(robots, paused, strict=True)],
             view.dt,
         )
-        self._activity(n, idx, held & self.at_hold[idx])
+        self._activity(n, idx, waits)
         return cmd
 
     def _activity(self, n: int, idx: np.ndarray, held: np.ndarray) -> None:
