@@ -14,7 +14,12 @@ from swarmpark.control.nav.fleetmap import (
     points_in_rects,
 )
 from swarmpark.control.nav.follower import PathFollower, PathState
-from swarmpark.control.nav.params import FleetMapParams, FollowerParams, PlannerParams
+from swarmpark.control.nav.params import (
+    FleetMapParams,
+    FollowerParams,
+    PeopleParams,
+    PlannerParams,
+)
 from swarmpark.control.nav.planner import Planner
 
 P = FleetMapParams(spot_cost=6.0)  # the spot layer on, to test it
@@ -108,3 +113,41 @@ def test_stuck_skid_is_planned_again_with_the_still_skids_as_obstacles():
         pl.update(make_view(poses, goals, t=t), states, fol, fleet)
     assert P.stuck_s <= t < P.stuck_s + 1.0
     assert not _crosses(states[0].path, poses[1], grow=0.3)
+
+
+PEOPLE = PeopleParams()
+
+
+def _repair_with_person(vel, people=PEOPLE):
+    """Skid 0's plan after a stuck repair with a person in its lane at (4, 3)."""
+    poses, goals = [[1.0, 3.0, 0.0]], [[9.0, 3.0, 0.0]]
+    states = [PathState()]
+    fol = PathFollower(FollowerParams())
+    pl = Planner(PlannerParams(), staging_m=0.9, direct_within_m=1.8, fleet_params=P, people=people)
+    fleet = FleetState(parked=np.zeros(1, bool), bound=np.ones(1, bool), still=np.zeros(1, bool))
+    person = dict(people_xy=[[4.0, 3.0]], people_vel=[vel], people_radius=[0.25])
+    pl.update(make_view(poses, goals, goal_changed=[True], **person), states, fol, fleet)
+    first, t = states[0].path, 0.0
+    while states[0].path is first and t < 2 * P.stuck_s:
+        t += 0.5
+        pl.update(make_view(poses, goals, t=t, **person), states, fol, fleet)
+    return first, states[0].path
+
+
+def _gap(path, xy):
+    """Closest approach of a polyline to a point."""
+    pts = np.vstack([np.linspace(a, b, 50) for a, b in zip(path[:-1], path[1:], strict=True)])
+    return float(np.hypot(*(pts - xy).T).min())
+
+
+def test_stuck_skid_plans_round_a_person_standing_in_its_lane():
+    first, repaired = _repair_with_person([0.0, 0.0])
+    assert _gap(first, [4.0, 3.0]) < 0.1  # the first plan runs straight through them
+    pp = PEOPLE
+    # The repair keeps the yield's stand-off from the person's rim plus half the skid's width.
+    want = 0.25 + pp.clearance_m + pp.standing_berth_m + FOOTPRINT.width_m / 2
+    assert _gap(repaired, [4.0, 3.0]) >= want - 0.1  # (within a map cell or two)
+    # A person walking will be elsewhere; without the yield people are not planned round.
+    for vel, people in (([0.0, 1.0], pp), ([0.0, 0.0], None)):
+        first, repaired = _repair_with_person(vel, people)
+        assert _gap(repaired, [4.0, 3.0]) < 0.1

@@ -14,7 +14,12 @@ costmap plus two fleet layers:
   pass-through of the 2015 paper's Fig. 6);
 - **the goal spots of skids still on their way** cost extra per metre, so a path goes around
   spots that will be filled while there is a way around, and crosses them (to reach a deep
-  spot through the front row) only when there is none.
+  spot through the front row) only when there is none;
+- **people standing** (in a stuck skid's repair only) are lethal discs as wide as the stand-off
+  the people yield keeps from them (:mod:`.people`), grown by the planning skid's inscribed
+  radius: a skid that the yield holds in front of a person standing in its lane plans round
+  them, where before it drove up to the person again after every repair (found on a
+  generated people site: a skid 5 m from its spot for the last 150 s of the run).
 
 The first plan for a goal is made on the static map alone (by the time the skid gets there
 the fleet has moved); the fleet layers are used when a plan is *repaired*: when a skid parks
@@ -42,6 +47,7 @@ from swarmpark.plan.grid import Costmap
 __all__ = [
     "FleetState",
     "blocking",
+    "disc_cells",
     "fleet_costmap",
     "fleet_layers",
     "points_in_rects",
@@ -128,11 +134,40 @@ def blocking(view: ControlView, i: int, parked: np.ndarray) -> np.ndarray:
     return out & (view.priority >= view.priority[i])
 
 
-def _layer_changes(cm: Costmap, view: ControlView, i, parked, bound, p: FleetMapParams):
+def disc_cells(cm: Costmap, centres: np.ndarray, radii: np.ndarray):
+    """Cells ``(rows, cols)`` whose centres lie in any of the discs (``(K, 2)``, ``(K,)``)."""
+    grid = cm.grid
+    res = grid.resolution_m
+    ox, oy = grid.origin
+    h, w = cm.cost.shape
+    rows_l, cols_l = [np.zeros(0, int)], [np.zeros(0, int)]
+    for (x, y), r in zip(centres, radii, strict=True):
+        c0, c1 = (
+            max(int(np.floor((x - r - ox) / res)), 0),
+            min(int(np.ceil((x + r - ox) / res)) + 1, w),
+        )
+        r0, r1 = (
+            max(int(np.floor((y - r - oy) / res)), 0),
+            min(int(np.ceil((y + r - oy) / res)) + 1, h),
+        )
+        if r0 >= r1 or c0 >= c1:
+            continue
+        rr, cc = np.mgrid[r0:r1, c0:c1]
+        inside = np.hypot(ox + (cc + 0.5) * res - x, oy + (rr + 0.5) * res - y) <= r
+        rows_l.append(rr[inside])
+        cols_l.append(cc[inside])
+    return np.concatenate(rows_l), np.concatenate(cols_l)
+
+
+def _layer_changes(
+    cm: Costmap, view: ControlView, i, parked, bound, p: FleetMapParams, people=None
+):
     """The fleet layers as changes to ``cm``'s cells, in order: ``(rows, cols, add)``, with
-    ``add=None`` for lethal."""
+    ``add=None`` for lethal (``people``: discs ``(centres, radii)`` to keep off, or None)."""
     out = []
     r_in = cm.inscribed_m
+    if people is not None and len(people[0]):
+        out.append((*disc_cells(cm, people[0], people[1] + r_in), None))
     if p.spot_cost:  # adding 0 changes nothing (the default): skip the skids' spots
         for j in np.flatnonzero(bound & ~parked):
             if j == i:
@@ -164,6 +199,7 @@ def fleet_costmap(
     parked: np.ndarray,
     bound: np.ndarray,
     p: FleetMapParams,
+    people=None,
 ) -> Costmap:
     """Skid ``i``'s costmap ``cm`` with the fleet layers (see the module docstring), a copy.
 
@@ -175,7 +211,7 @@ def fleet_costmap(
         ``(N,)`` skids still on their way to a goal: their goal spots cost extra.
     """
     cost = cm.cost.copy()
-    _apply(cost, _layer_changes(cm, view, i, parked, bound, p))
+    _apply(cost, _layer_changes(cm, view, i, parked, bound, p, people))
     return replace(cm, cost=cost)
 
 
@@ -187,10 +223,11 @@ def fleet_layers(
     parked: np.ndarray,
     bound: np.ndarray,
     p: FleetMapParams,
+    people=None,
 ):
     """:func:`fleet_costmap` in place: ``cm`` itself with the fleet layers for the block, its
     cells restored after it (a copy of a large map per repair would cost more than the plan)."""
-    changes = _layer_changes(cm, view, i, parked, bound, p)
+    changes = _layer_changes(cm, view, i, parked, bound, p, people)
     if not changes:
         yield cm
         return

@@ -95,6 +95,7 @@ class Navigator:
             staging_m=p.docking.runup_m,
             direct_within_m=p.docking.manoeuvre_radius_m,
             fleet_params=p.fleet_map,
+            people=p.people if p.people.enabled else None,
         )
         self.field = PotentialField(p.apf, dynamic=p.avoidance != "rvo")
         self.docking = Docking(p.docking, BackUp(p.backup, stall_s=stall_s), stall_s=stall_s)

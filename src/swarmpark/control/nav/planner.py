@@ -14,7 +14,7 @@ from swarmpark.control.nav.fleetmap import (
     run_extra,
 )
 from swarmpark.control.nav.follower import PathFollower, PathState, point_at
-from swarmpark.control.nav.params import FleetMapParams, PlannerParams
+from swarmpark.control.nav.params import FleetMapParams, PeopleParams, PlannerParams
 from swarmpark.core.geometry import Footprint
 from swarmpark.plan.grid import Costmap, build_costmap, path_length, paths_from, shortcut
 
@@ -46,8 +46,12 @@ class Planner:
         staging_m: float,
         direct_within_m: float,
         fleet_params: FleetMapParams | None = None,
+        people: PeopleParams | None = None,
     ):
         self.params = params
+        #: The people yield's stand-off, for a stuck skid's repair round people standing
+        #: (None: people are left out of plans).
+        self.people = people
         self.fleet_params = FleetMapParams() if fleet_params is None else fleet_params
         self._parked: np.ndarray | None = None  # the parked skids of the last tick
         #: Skids whose plan is repaired next tick round the parked skids (:meth:`repair`).
@@ -130,7 +134,8 @@ class Planner:
                 parked = fleet.parked | (fleet.still if i in stuck else False)
                 bound = fleet.bound if i in stuck else np.zeros_like(fleet.bound)
                 extra = run_extra(view, i, parked, bound, self.fleet_params)
-                with fleet_layers(cm, view, i, parked, bound, self.fleet_params) as fcm:
+                people = self._standing_people(view) if i in stuck else None
+                with fleet_layers(cm, view, i, parked, bound, self.fleet_params, people) as fcm:
                     path = self.plan(
                         fcm, view.poses[i], goal, extra, work=work, footprint=view.footprints[i]
                     )
@@ -142,6 +147,17 @@ class Planner:
             if path is not None:
                 st.reverse = follower.choose_end(view, i, path)
         self._asked = (asked & repair) - done  # asked for, but over this tick's budget
+
+    def _standing_people(self, view: ControlView):
+        """The people standing (slower than the yield's ``walking_mps``) as discs to keep
+        off: centres and their radii plus the yield's stand-off from a standing person
+        (``clearance_m + standing_berth_m``), or None without the yield."""
+        pp = self.people
+        if pp is None or not len(view.people_xy):
+            return None
+        still = np.hypot(*view.people_vel.T) < pp.walking_mps
+        berth = pp.clearance_m + pp.standing_berth_m
+        return view.people_xy[still], view.people_radius[still] + berth
 
     def repair(self, i: int) -> None:
         """Plan skid ``i`` again at the next update, round the parked skids (as when a skid
