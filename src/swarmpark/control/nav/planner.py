@@ -37,6 +37,10 @@ class Planner:
     direct_within_m
         Closer to the goal than this, the path goes there directly (the docking manoeuvre
         takes over there).
+    people
+        :class:`~swarmpark.control.nav.params.PeopleParams` of the people yield: a stuck
+        skid's repair keeps its stand-off from the people standing (None: people are left
+        out of plans).
     """
 
     def __init__(
