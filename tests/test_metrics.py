@@ -107,6 +107,34 @@ def test_deadlock_names_its_cause_from_the_navigator():
     assert dl["cause"] == "no path to its goal on the known map"
 
 
+class _Held(Scripted):
+    """Stands still; the fill order holds the skid, and ``at_hold`` says whether it stands
+    at its stop (as the navigator's attribute does; None: no such attribute)."""
+
+    def __init__(self, at_hold):
+        super().__init__(lambda t: [[0.0, 0.0]])
+        if at_hold is not None:
+            self.at_hold = np.array([at_hold])
+
+
+@pytest.mark.parametrize(("at_hold", "reported"), [(False, True), (True, False), (None, False)])
+def test_a_held_skid_is_waiting_only_at_its_stop(monkeypatch, at_hold, reported):
+    """A skid the fill order holds back waits on purpose (no deadlock) once it stands at its
+    stop; held but stuck on its way there, it is in deadlock like any other. A controller
+    that does not say where its held skids stand has them all waiting."""
+    from swarmpark.supervisor import core
+
+    monkeypatch.setattr(
+        core.fill_order, "holds", lambda groups, poses: (np.ones(len(poses), bool),) * 2
+    )
+    world = make_world(
+        duration_s=15, commands=[{"at_s": 0, "goto": {"robot": "a", "pose": [7.0, 3.0, 0.0]}}]
+    )
+    r = run_world(world, controller=_Held(at_hold)).result
+    assert r["success"] is False
+    assert len(r["deadlocks"]) == (1 if reported else 0)
+
+
 def test_lower_bound_goes_around_a_wall():
     world = make_world(
         map={

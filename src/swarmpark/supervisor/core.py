@@ -411,8 +411,14 @@ class Supervisor(CommandsMixin):
         self._check_health()
         if self.sensing is not None:
             self._sense()
-        # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
-        paused = self.stopped | self.teleop | self.estopped | view.hold | self.health.faulted
+        # Waiting on purpose (stopped, held back by the fill order) is not a deadlock. A held
+        # skid waits from when it stands at its stop (the navigator's ``at_hold``); on its
+        # way there it is driving, and a skid stuck on the way is reported like any other.
+        hold = view.hold
+        at_hold = getattr(self.controller, "at_hold", None)
+        if hold is not None and at_hold is not None and len(at_hold) == self.n:
+            hold = hold & at_hold
+        paused = self.stopped | self.teleop | self.estopped | hold | self.health.faulted
         for name in ("making_room", "queued"):  # standing aside (RVO), queued at a door
             aside = getattr(self.controller, name, None)
             if aside is not None and len(aside) == self.n:
