@@ -133,6 +133,11 @@ def test_a_held_skid_is_waiting_only_at_its_stop(monkeypatch, at_hold, reported)
     r = run_world(world, controller=_Held(at_hold)).result
     assert r["success"] is False
     assert len(r["deadlocks"]) == (1 if reported else 0)
+    if reported:  # the cause says it is held, and not at its stop
+        assert (
+            r["deadlocks"][0]["cause"]
+            == "held back by the fill order, not at its stop: no progress"
+        )
 
 
 def test_lower_bound_goes_around_a_wall():

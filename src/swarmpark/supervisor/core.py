@@ -297,13 +297,19 @@ class Supervisor(CommandsMixin):
         if self.stopped[i] or self.teleop[i] or self.estopped:
             return "stopped by the operator"
         held = self.held()
+        prefix = ""
         if len(held) == self.n and held[i]:
-            return "held back by the fill order"
+            at_hold = getattr(self.controller, "at_hold", None)
+            if at_hold is None or len(at_hold) != self.n or at_hold[i]:
+                return "held back by the fill order"
+            prefix = "held back by the fill order, not at its stop: "
         explain = getattr(self.controller, "explain", None)
         if explain is None:
-            return "no progress"
+            return prefix + "no progress"
         reason, others = explain(i)
-        return reason if not others else f"{reason}: {', '.join(self.ids[j] for j in others)}"
+        return prefix + (
+            reason if not others else f"{reason}: {', '.join(self.ids[j] for j in others)}"
+        )
 
     def _run_due_commands(self) -> None:
         eps = 1e-9
