@@ -76,13 +76,11 @@ class FleetState:
             object.__setattr__(self, "waiting", np.zeros(len(self.parked), dtype=bool))
 
 
-def rect_cells(cm: Costmap, pose: np.ndarray, fp: Footprint, grow_m: float):
-    """Cells ``(rows, cols)`` whose centres lie in footprint ``fp`` at ``pose`` grown by
-    ``grow_m`` on every side (a conservative stand-in for the Minkowski sum with a disc)."""
+def _window(cm: Costmap, centre, reach: float):
+    """The cells of ``cm`` within ``reach`` of ``centre`` along each axis (a square window,
+    clipped to the map): their rows, columns and centres ``(K, 2)``, flattened."""
     grid = cm.grid
     res = grid.resolution_m
-    centre = pose[:2] + fp.center_offset_m * np.array([np.cos(pose[2]), np.sin(pose[2])])
-    reach = float(np.hypot(fp.length_m / 2 + grow_m, fp.width_m / 2 + grow_m))
     h, w = cm.cost.shape
     ox, oy = grid.origin
     c0 = max(int(np.floor((centre[0] - reach - ox) / res)), 0)
@@ -90,11 +88,31 @@ def rect_cells(cm: Costmap, pose: np.ndarray, fp: Footprint, grow_m: float):
     r0 = max(int(np.floor((centre[1] - reach - oy) / res)), 0)
     r1 = min(int(np.ceil((centre[1] + reach - oy) / res)) + 1, h)
     if r0 >= r1 or c0 >= c1:
-        return np.zeros(0, int), np.zeros(0, int)
+        return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 2))
     rr, cc = np.mgrid[r0:r1, c0:c1]
-    xy = np.column_stack([ox + (cc.ravel() + 0.5) * res, oy + (rr.ravel() + 0.5) * res])
+    rr, cc = rr.ravel(), cc.ravel()
+    return rr, cc, np.column_stack([ox + (cc + 0.5) * res, oy + (rr + 0.5) * res])
+
+
+def rect_cells(cm: Costmap, pose: np.ndarray, fp: Footprint, grow_m: float):
+    """Cells ``(rows, cols)`` whose centres lie in footprint ``fp`` at ``pose`` grown by
+    ``grow_m`` on every side (a conservative stand-in for the Minkowski sum with a disc)."""
+    centre = pose[:2] + fp.center_offset_m * np.array([np.cos(pose[2]), np.sin(pose[2])])
+    reach = float(np.hypot(fp.length_m / 2 + grow_m, fp.width_m / 2 + grow_m))
+    rr, cc, xy = _window(cm, centre, reach)
     inside = points_in_rects(xy, pose[None], [fp], grow_m)
-    return rr.ravel()[inside], cc.ravel()[inside]
+    return rr[inside], cc[inside]
+
+
+def disc_cells(cm: Costmap, centres: np.ndarray, radii: np.ndarray):
+    """Cells ``(rows, cols)`` whose centres lie in any of the discs (``(K, 2)``, ``(K,)``)."""
+    rows_l, cols_l = [np.zeros(0, int)], [np.zeros(0, int)]
+    for c, r in zip(centres, radii, strict=True):
+        rr, cc, xy = _window(cm, c, float(r))
+        inside = np.hypot(*(xy - c).T) <= r
+        rows_l.append(rr[inside])
+        cols_l.append(cc[inside])
+    return np.concatenate(rows_l), np.concatenate(cols_l)
 
 
 def points_in_rects(
@@ -132,31 +150,6 @@ def blocking(view: ControlView, i: int, parked: np.ndarray) -> np.ndarray:
     out = parked.copy()
     out[i] = False
     return out & (view.priority >= view.priority[i])
-
-
-def disc_cells(cm: Costmap, centres: np.ndarray, radii: np.ndarray):
-    """Cells ``(rows, cols)`` whose centres lie in any of the discs (``(K, 2)``, ``(K,)``)."""
-    grid = cm.grid
-    res = grid.resolution_m
-    ox, oy = grid.origin
-    h, w = cm.cost.shape
-    rows_l, cols_l = [np.zeros(0, int)], [np.zeros(0, int)]
-    for (x, y), r in zip(centres, radii, strict=True):
-        c0, c1 = (
-            max(int(np.floor((x - r - ox) / res)), 0),
-            min(int(np.ceil((x + r - ox) / res)) + 1, w),
-        )
-        r0, r1 = (
-            max(int(np.floor((y - r - oy) / res)), 0),
-            min(int(np.ceil((y + r - oy) / res)) + 1, h),
-        )
-        if r0 >= r1 or c0 >= c1:
-            continue
-        rr, cc = np.mgrid[r0:r1, c0:c1]
-        inside = np.hypot(ox + (cc + 0.5) * res - x, oy + (rr + 0.5) * res - y) <= r
-        rows_l.append(rr[inside])
-        cols_l.append(cc[inside])
-    return np.concatenate(rows_l), np.concatenate(cols_l)
 
 
 def _layer_changes(
