@@ -299,8 +299,8 @@ class Supervisor(CommandsMixin):
         held = self.held()
         prefix = ""
         if len(held) == self.n and held[i]:
-            at_hold = getattr(self.controller, "at_hold", None)
-            if at_hold is None or len(at_hold) != self.n or at_hold[i]:
+            at_hold = self._per_robot("at_hold")
+            if at_hold is None or at_hold[i]:
                 return "held back by the fill order"
             prefix = "held back by the fill order, not at its stop: "
         explain = getattr(self.controller, "explain", None)
@@ -421,21 +421,30 @@ class Supervisor(CommandsMixin):
         # skid waits from when it stands at its stop (the navigator's ``at_hold``); on its
         # way there it is driving, and a skid stuck on the way is reported like any other.
         hold = view.hold
-        at_hold = getattr(self.controller, "at_hold", None)
-        if hold is not None and at_hold is not None and len(at_hold) == self.n:
+        at_hold = self._per_robot("at_hold")
+        if hold is not None and at_hold is not None:
             hold = hold & at_hold
         paused = self.stopped | self.teleop | self.estopped | hold | self.health.faulted
         for name in ("making_room", "queued"):  # standing aside (RVO), queued at a door
-            aside = getattr(self.controller, name, None)
-            if aside is not None and len(aside) == self.n:
+            aside = self._per_robot(name)
+            if aside is not None:
                 paused = paused | aside
-        activity = getattr(self.controller, "activity", None)
-        if activity is not None and len(activity) != self.n:
-            activity = None
         self.metrics.on_step(
-            self.t, self.truth_poses(), self.goals, self.has_goal, paused, step, activity
+            self.t,
+            self.truth_poses(),
+            self.goals,
+            self.has_goal,
+            paused,
+            step,
+            self._per_robot("activity"),
         )
         return step
+
+    def _per_robot(self, name: str) -> np.ndarray | None:
+        """The controller's per-robot array ``name`` (``making_room``, ``queued``,
+        ``at_hold``, ``activity``), or None if it has none for the whole fleet this tick."""
+        value = getattr(self.controller, name, None)
+        return value if value is not None and len(value) == self.n else None
 
     def _check_health(self) -> None:
         """Heartbeat and command following on what came back (:mod:`.health`); a robot
