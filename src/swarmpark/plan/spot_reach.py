@@ -214,9 +214,10 @@ class SpotWindow:
         return SpotReach(
             int(j),
             (float(pose[0]), float(pose[1]), float(pose[2])),
-            "no manoeuvre (forwards, backwards, turning on the spot) gets a "
-            f"{fp.length_m:g} x {fp.width_m:g} m skid in between the walls"
-            + (f" and the {before} spot(s) filled before it" if before else ""),
+            "no manoeuvre (forwards, backwards, turning on the spot in steps of 18-27 deg) "
+            f"gets a {fp.length_m:g} x {fp.width_m:g} m skid in between the walls"
+            + (f" and the {before} spot(s) filled before it" if before else "")
+            + "; a skid may still make it in with smaller turns",
         )
 
 
