@@ -133,6 +133,28 @@ def test_a_wedged_skid_first_backs_straight_out():
     assert out[0] < 3.2 - 0.6 and abs(out[1] - 3.0) < 1e-9  # clear of the slot, same line
 
 
+def test_a_skid_wedged_between_parked_skids_backs_straight_out():
+    """Parked skids 3 cm from it on both sides (the collision monitor's margin; they are
+    stamped into the window 5 cm wide) and a wall 0.3 m ahead: its way out straight back is
+    checked without their stamps' margin, which it already stands in (with it, every way out
+    failed and a skid by a pillar stood 16 s, 0.5 m from its spot, on a generated hangar)."""
+    gap = 0.03
+    side = 0.8 + gap
+    poses = [[3.6, 3.0, 0.0], [4.1, 3.0 + side, 0.0], [4.1, 3.0 - side, 0.0]]
+    view = make_view(
+        poses,
+        [[1.0, 1.0, np.pi / 2]] + poses[1:],
+        boxes=[(4.9, 1.5, 5.2, 4.5)],
+        active=[True, False, False],
+    )
+    planner = ManoeuvrePlanner(ManoeuvreParams())
+    occ, origin, res = planner._window(view, 0)
+    segments = planner._plan(view, 0, occ, origin, res, planner.params.grow_m)
+    assert segments and segments[0][0] == "reverse"
+    out = segments[0][2]
+    assert out[0] <= 4.1 - 1.2 and abs(out[1] - 3.0) < 1e-9  # past the neighbours' rears
+
+
 def test_runs_and_turns_brake_onto_their_ends():
     # The same manoeuvre driven with the braking profile and with the proportional law
     # (brake_share 0): both end at the spot, braking 3 s sooner (17.8 s against 20.8 s).

@@ -258,11 +258,11 @@ class ManoeuvrePlanner:
                 if not footprint_clear(occ, origin, res, fp, out, grow):
                     continue
                 # The way out is checked on the footprint shrunk by half a cell diagonal and
-                # by the margin the other skids are stamped with: the skid is already within
-                # those margins (the monitor keeps 3 cm; stamped 5 cm wide, a neighbour 3 cm
-                # away failed every way out, and a skid by a pillar stood 16 s 0.5 m from its spot on
-                # a generated hangar). A solid in the way still fails it; the collision
-                # monitor guards the run itself.
+                # by the margin the other skids are stamped with: the skid may already stand
+                # within those (the monitor keeps 3 cm; with only the half cell, every way out
+                # failed and a skid by a pillar stood 16 s, 0.5 m from its spot, on a generated
+                # hangar). A solid in the way still fails it; the collision monitor guards
+                # the run itself.
                 shrink = -(half + p.skid_margin_m)
                 way = [pose + sign * x * head for x in np.arange(0.05, d, 0.05)]
                 if not all(footprint_clear(occ, origin, res, fp, q, shrink) for q in way):
