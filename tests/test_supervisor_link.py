@@ -9,6 +9,7 @@ import pytest
 from helpers import make_world
 from shapely.geometry import box
 
+from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import Footprint, integrate_unicycle
 from swarmpark.core.gridmap import grid_from_walls
 from swarmpark.links.base import (
@@ -463,3 +464,43 @@ def test_amcl_skips_a_silent_robot_and_catches_up_when_it_reports_again():
     # where a really is.
     assert est[2.0][0][0] - frozen[-1][0] > 0.1
     assert np.hypot(*(sup.estimates[0, :2] - sup.sim.poses[0, :2])) < 0.1
+
+
+def test_the_reassignment_never_takes_a_spot_from_under_a_parked_skid():
+    """Three spots in a row; the skids bound for the two outer ones stand on them, the third
+    is far off to the west. The formation cost (shapes matched after moving the centroids
+    together) would hand the parked western skid the middle spot and the far one its spot:
+    the solve prices a parked skid's other goals higher, but not enough. A re-assignment that
+    moves a parked (or docking) skid's goal is not taken (a generated people site: a skid just
+    parked was sent on to the row's deeper spot past a skid parked in between, and the run
+    parked 9 of 10)."""
+    cmd = ParkCmd(
+        robots=["p", "q", "r"],
+        boundary=[[6.0, 2.4], [10.0, 2.4], [10.0, 3.6], [6.0, 3.6]],
+        heading_deg=0,
+        margin_m=0.05,
+        assignment="formation",
+    )
+    spread = [{"id": k, "pose": [1.0 + 2.0 * n, 1.0, 0.0]} for n, k in enumerate("pqr")]
+    _, _, lay = Supervisor(make_world(map={"size_m": [12, 6]}, robots=spread)).plan_layout(cmd)
+    goals = lay.poses[np.argsort(lay.poses[:, 0])]  # west to east
+    robots = [
+        {"id": "p", "pose": [goals[0, 0], goals[0, 1], 0.0]},  # parked on the western spot
+        {"id": "q", "pose": [1.5, goals[1, 1], 0.0]},  # far off
+        {"id": "r", "pose": [goals[2, 0], goals[2, 1], 0.0]},  # parked on the eastern spot
+    ]
+    sup = Supervisor(make_world(map={"size_m": [12, 6]}, robots=robots))
+    assert sup.park(cmd).accepted
+    g = sup.groups[0]
+    g.goal_of = np.array(
+        [int(np.argmin(np.hypot(*(g.goals[:, :2] - goals[k, :2]).T))) for k in range(3)]
+    )
+    sup.goals[g.robots] = g.goals[g.goal_of]
+    before = sup.goals.copy()
+    # The solve alone would free the parked skid p (the case this rule is for).
+    cost = assign_mod.cost_matrix(sup.poses_known[:, :2], g.goals[:, :2], "formation")
+    pos_err, _ = goal_errors(sup.poses_known, g.goals[g.goal_of])
+    new, changed = assign_mod.reassign(cost, g.goal_of, pos_err <= POSITION_TOL_M)
+    assert changed and new[0] != g.goal_of[0]
+    sup._reassign()
+    np.testing.assert_array_equal(sup.goals, before)
