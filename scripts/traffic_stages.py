@@ -3,11 +3,11 @@ skids in traffic").
 
     python scripts/traffic_stages.py SCENARIO.yaml [...]
 
-For each skid on its way (more than 2 m from its goal, not held on purpose) with another skid
-within 2 m, the speed after each stage is recorded: the potential field with the goal force
-alone, with the walls, with the other skids (the field's command), after docking and
-manoeuvres, give way, the people yield, the collision monitor, the holds and queues, and the
-speed reached. Each stage is charged ``dt * (previous - next) / max speed``; the seconds are
+For each skid on its way (more than ``LOST_NEAR_M``, 2 m, from its goal, not held on
+purpose) with another skid within 2 m (the run result's ``in_traffic``), the speed after each
+stage is recorded: the potential field with the goal force alone, with the walls, with the
+other skids (the field's command), after docking and manoeuvres, give way, the people yield,
+the collision monitor, the holds and queues, and the speed reached. Each stage is charged ``dt * (previous - next) / max speed``; the seconds are
 summed over the skids and printed per scenario (default monitor stack only: the stages are
 the navigator's own methods, wrapped for the run).
 """
@@ -23,6 +23,7 @@ import numpy as np
 
 from swarmpark.apps.run import run_world
 from swarmpark.control.nav.field import PotentialField
+from swarmpark.metrics import LOST_NEAR_M
 from swarmpark.world.scenario import build_world, load_scenario
 
 STAGES = (
@@ -36,7 +37,6 @@ STAGES = (
     "holds, queues",
     "acceleration",
 )
-NEAR_M = 2.0
 
 
 class StageObserver:
@@ -95,11 +95,11 @@ class StageObserver:
             return
         to_goal = np.hypot(*(poses[:, :2] - view.goals[:, :2]).T)
         for k, i in enumerate(rec["idx"]):
-            if self.nav.robots[i].dock.docked or self.nav.activity[i] or to_goal[i] < NEAR_M:
+            if self.nav.robots[i].dock.docked or self.nav.activity[i] or to_goal[i] < LOST_NEAR_M:
                 continue
             gap = np.hypot(*(poses[:, :2] - poses[i, :2]).T)
             gap[i] = np.inf
-            if gap.min() >= NEAR_M:
+            if gap.min() >= LOST_NEAR_M:
                 continue
             vmax = view.max_speed[i]
             sp = [vmax] + [min(rec[s][k], vmax) for s in range(8)] + [min(speed[i], vmax)]

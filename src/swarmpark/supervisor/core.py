@@ -299,8 +299,7 @@ class Supervisor(CommandsMixin):
         held = self.held()
         prefix = ""
         if len(held) == self.n and held[i]:
-            at_hold = self._per_robot("at_hold")
-            if at_hold is None or at_hold[i]:
+            if self._waiting_held(held)[i]:
                 return "held back by the fill order"
             prefix = "held back by the fill order, not at its stop: "
         explain = getattr(self.controller, "explain", None)
@@ -417,13 +416,8 @@ class Supervisor(CommandsMixin):
         self._check_health()
         if self.sensing is not None:
             self._sense()
-        # Waiting on purpose (stopped, held back by the fill order) is not a deadlock. A held
-        # skid waits from when it stands at its stop (the navigator's ``at_hold``); on its
-        # way there it is driving, and a skid stuck on the way is reported like any other.
-        hold = view.hold
-        at_hold = self._per_robot("at_hold")
-        if hold is not None and at_hold is not None:
-            hold = hold & at_hold
+        # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
+        hold = self._waiting_held(view.hold)
         paused = self.stopped | self.teleop | self.estopped | hold | self.health.faulted
         for name in ("making_room", "queued"):  # standing aside (RVO), queued at a door
             aside = self._per_robot(name)
@@ -439,6 +433,14 @@ class Supervisor(CommandsMixin):
             self._per_robot("activity"),
         )
         return step
+
+    def _waiting_held(self, held: np.ndarray) -> np.ndarray:
+        """Of the skids ``held`` back by the fill order, those waiting on purpose: a held
+        skid waits from when it stands at its stop (the controller's ``at_hold``); on its way
+        there it is driving, and a skid stuck on the way is reported like any other. A
+        controller that does not say where its held skids stand has them all waiting."""
+        at_hold = self._per_robot("at_hold")
+        return held if at_hold is None else held & at_hold
 
     def _per_robot(self, name: str) -> np.ndarray | None:
         """The controller's per-robot array ``name`` (``making_room``, ``queued``,
