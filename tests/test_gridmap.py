@@ -6,7 +6,13 @@ import yaml
 from PIL import Image
 from shapely.geometry import Polygon
 
-from swarmpark.core.gridmap import MapError, grid_from_walls, load_map_yaml, save_map_yaml
+from swarmpark.core.gridmap import (
+    MapError,
+    grid_from_walls,
+    load_map_yaml,
+    refine_occupancy,
+    save_map_yaml,
+)
 
 # A 6 x 4 map at 1 m per cell; rows printed top (y = 3) to bottom (y = 0).
 PICTURE = """
@@ -85,3 +91,19 @@ def test_bad_map_metadata_is_named(tmp_path):
     (tmp_path / "m.yaml").write_text(yaml.safe_dump({"image": "x.pgm", "resolution": 0.05}))
     with pytest.raises(MapError, match="has no 'origin' key"):
         load_map_yaml(tmp_path / "m.yaml")
+
+
+def test_refine_occupancy_gives_back_the_free_part_of_a_wall_cell():
+    """A wall from x = 1.06 m on a 10 cm grid takes the cell from 1.0 m; on 5 cm cells made
+    from the wall itself only the half from 1.05 m stays occupied. A coarse cell no solid
+    overlaps (a keep-out drawn on the map) stays occupied whole."""
+    wall = np.array([[[1.06, 0.0], [2.0, 0.0], [2.0, 1.0], [1.06, 1.0]]])
+    occ = np.zeros((10, 20), bool)
+    occ[:, 10:] = True  # the wall, rasterized outwards
+    occ[2, 3] = True  # a keep-out
+    fine = refine_occupancy(occ, np.zeros(2), 0.1, 2, wall)
+    assert fine.shape == (20, 40)
+    assert not fine[:, 20].any() and fine[:, 21:].all()
+    assert fine[4:6, 6:8].all() and fine.sum() == 20 * 19 + 4
+    # Nothing changes without a split.
+    assert np.array_equal(refine_occupancy(occ, np.zeros(2), 0.1, 1, wall), occ)

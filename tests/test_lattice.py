@@ -134,3 +134,24 @@ def test_the_window_edge_counts_as_a_wall():
         plan_manoeuvre(occ, np.zeros(2), RES, FP, start, edge, speed_mps=0.5, yaw_rate_radps=1.0)
         is None
     )
+
+
+def test_a_goal_by_a_wall_is_reached_from_a_cell_beside_its_own():
+    """A spot by the right wall with a block under it and the ceiling close: the skid cannot
+    turn on the spot's own cell, only one cell to the left, and cannot come in along the
+    axis. With the goal tolerance the plan ends beside the goal's cell, within the
+    tolerance, touching nothing; without it there is no plan."""
+    occ = _room([(3.3, 0.0, 6.0, 1.95)], size=(6.0, 3.6))
+    start, goal = np.array([1.5, 2.8, 0.0]), np.array([5.17, 2.8, np.pi / 2])
+    kw = {"speed_mps": 0.5, "yaw_rate_radps": 1.0}
+    assert plan_manoeuvre(occ, np.zeros(2), RES, FP, start, goal, **kw) is None
+    m = plan_manoeuvre(occ, np.zeros(2), RES, FP, start, goal, goal_tol_m=0.05, **kw)
+    assert m is not None
+    end = m.poses[-1]
+    assert end[2] == pytest.approx(goal[2])
+    assert np.hypot(*(end[:2] - goal[:2])) <= 0.05 + RES * np.sqrt(0.5)
+    assert not any(_touches(occ, p) for p in m.poses)
+    # The last run goes on to the exact goal.
+    kind, _, to = m.segments()[-1]
+    assert kind in ("forward", "reverse")
+    np.testing.assert_allclose(to, goal)

@@ -44,6 +44,7 @@ __all__ = [
     "HEADING_STEPS",
     "HEADINGS",
     "Manoeuvre",
+    "cells_near",
     "footprint_clear",
     "free_masks",
     "plan_manoeuvre",
@@ -192,17 +193,39 @@ def _free_at(occ: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return hit[r : r + occ.shape[0], r : r + occ.shape[1]] < 0.5
 
 
+def cells_near(
+    r: int, c: int, tol_m: float, res: float, shape: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(rows, cols, dist_m)``: the cells of a window of ``shape`` whose centres lie within
+    ``tol_m`` of cell ``(r, c)``'s (that one among them), row by row, and how far."""
+    reach = int(np.floor(tol_m / res + 1e-9))
+    dr, dc = np.mgrid[-reach : reach + 1, -reach : reach + 1]
+    dist = np.hypot(dr, dc).ravel() * res
+    rows, cols = r + dr.ravel(), c + dc.ravel()
+    ok = (dist <= tol_m + 1e-9) & (rows >= 0) & (cols >= 0) & (rows < shape[0]) & (cols < shape[1])
+    return rows[ok], cols[ok], dist[ok]
+
+
+#: What ending a manoeuvre beside the goal's cell costs on top of the drive (s).
+_OFF_GOAL_S = 10.0
+
+
 @njit(cache=True)
-def _astar(free, turn_free, steps, step_len, start, goal, h, v, w_rate, rev_cost, budget):
+def _astar(free, turn_free, steps, step_len, start, goals, extra, h, v, w_rate, rev_cost, budget):
     """A* over (heading, row, col); ``free[k]``: pose free at heading k, ``turn_free[k]``:
-    turning between k and k+1 free. Returns the parent array, the move array, the goal's
-    cost and the number of expansions (cost inf if not found)."""
+    turning between k and k+1 free. ``goals`` ``(G, 3)``: the goal states, each ending the
+    search at ``extra`` (s) more (a sink behind them, so a dearer goal state is taken only
+    when it saves more than that). Returns the parent array, the move array, the goal state
+    reached, the cost and the number of expansions (cost inf if not found)."""
     n_k, n_r, n_c = free.shape
     size = n_k * n_r * n_c
     g = np.full(size, np.inf)
     parent = np.full(size, -1, np.int64)
     move = np.zeros(size, np.int8)
     closed = np.zeros(size, np.bool_)
+    goal_s = (goals[:, 0] * n_r + goals[:, 1]) * n_c + goals[:, 2]
+    sink = size  # the search ends when the sink is taken off the heap
+    best_end, best_cost = -1, np.inf
     k0, r0, c0 = start
     s0 = (k0 * n_r + r0) * n_c + c0
     g[s0] = 0.0
@@ -212,6 +235,8 @@ def _astar(free, turn_free, steps, step_len, start, goal, h, v, w_rate, rev_cost
     expanded = 0
     while len(heap) > 0 and expanded < budget:
         _, s = heapq.heappop(heap)
+        if s == sink:
+            return parent, move, best_end, best_cost, expanded
         if closed[s]:
             continue
         closed[s] = True
@@ -220,8 +245,10 @@ def _astar(free, turn_free, steps, step_len, start, goal, h, v, w_rate, rev_cost
         rc = s % (n_r * n_c)
         r = rc // n_c
         c = rc % n_c
-        if k == goal[0] and r == goal[1] and c == goal[2]:
-            return parent, move, s, g[s], expanded
+        for q in range(goal_s.shape[0]):
+            if goal_s[q] == s and g[s] + extra[q] < best_cost:
+                best_end, best_cost = s, g[s] + extra[q]
+                heapq.heappush(heap, (best_cost, sink))
         for m in range(4):
             if m < 2:
                 d = 1 if m == 0 else -1
@@ -249,6 +276,8 @@ def _astar(free, turn_free, steps, step_len, start, goal, h, v, w_rate, rev_cost
                 parent[ns] = s
                 move[ns] = mv
                 heapq.heappush(heap, (ng + h[nr, nc], ns))
+    if best_end >= 0:  # the heap ran dry (or the budget out) with a goal state found
+        return parent, move, best_end, best_cost, expanded
     return parent, move, -1, np.inf, expanded
 
 
@@ -265,6 +294,7 @@ def plan_manoeuvre(
     grow_m: float = 0.02,
     reverse_cost: float = 1.5,
     budget: int = 400_000,
+    goal_tol_m: float = 0.0,
 ) -> Manoeuvre | None:
     """A manoeuvre from pose ``start`` to pose ``goal`` (pivot x, y, heading rad, world) in the
     window ``occ`` (``(H, W)`` bool, True occupied; cell ``(r, c)`` centred at ``origin +
@@ -274,6 +304,13 @@ def plan_manoeuvre(
     at the goal's cell and grid heading (:meth:`Manoeuvre.segments` adds the last turn and
     run to the exact goal). A
     start pose that is not free (the skid already touches its margin) is searched from anyway.
+
+    With ``goal_tol_m`` it may also end at the goal's grid heading in another cell whose
+    centre lies within that distance of the goal's cell centre, at :data:`_OFF_GOAL_S` more
+    than the time to drive that far (so only when the goal's own cell is out of reach or
+    much dearer; the docking closes the offset): a spot a few cm wider than the skid by a
+    wall may be reachable only along a line of cell centres beside its own (a generated
+    elevator car: its deep spot by the side wall, every search failed, never parked).
     """
     occ = np.asarray(occ, bool)
     n_r, n_c = occ.shape
@@ -285,8 +322,12 @@ def plan_manoeuvre(
             return None
     start_free = bool(free[s])
     free[s] = True  # leave from where it stands
-    if not free[g]:
+    rows, cols, off = cells_near(g[1], g[2], goal_tol_m, res, (n_r, n_c))
+    ok = free[g[0], rows, cols]
+    if not ok.any():
         return None
+    goals = np.column_stack([np.full(int(ok.sum()), g[0]), rows[ok], cols[ok]]).astype(np.int64)
+    extra = off[ok] / speed_mps + np.where(off[ok] > 0, _OFF_GOAL_S, 0.0)
     # Heuristic: travel time of the 2-D distance to the goal through cells free at some heading.
     passable = np.where(free.any(axis=0), 1.0, np.inf)
     passable[s[1], s[2]] = 1.0
@@ -299,7 +340,8 @@ def plan_manoeuvre(
         HEADING_STEPS,
         step_len,
         np.array(s, np.int64),
-        np.array(g, np.int64),
+        goals,
+        extra,
         h,
         float(speed_mps),
         float(yaw_rate_radps),

@@ -22,9 +22,19 @@ from numba import njit
 from scipy.signal import fftconvolve
 
 from swarmpark.core.geometry import Footprint, footprint_polygon
-from swarmpark.plan.lattice import HEADING_STEPS, HEADINGS, rect_mask, snap_state, stamp_footprint
+from swarmpark.core.gridmap import refine_occupancy
+from swarmpark.plan.lattice import (
+    HEADING_STEPS,
+    HEADINGS,
+    cells_near,
+    rect_mask,
+    snap_state,
+    stamp_footprint,
+)
 
 __all__ = [
+    "SPOT_CELL_M",
+    "SPOT_GOAL_TOL_M",
     "SpotReach",
     "SpotWindow",
     "as_report",
@@ -61,19 +71,25 @@ def as_report(flags: list[SpotReach]) -> list[dict]:
 
 
 @njit(cache=True)
-def _flood(hits, steps, start, seen, queue, parent):
-    """Breadth-first search over lattice states from ``start`` until a state where the skid
-    can turn all the way round or one on the window's edge (its row in ``queue``, whose
-    ``parent`` rows lead back to ``start`` at row 0), or every reachable state is seen (-1).
-    ``hits[k]`` counts the occupied cells under the footprint at heading
+def _flood(hits, steps, starts, seen, queue, parent):
+    """Breadth-first search over lattice states from ``starts`` ``(M, 3)`` until a state where
+    the skid can turn all the way round or one on the window's edge (its row in ``queue``,
+    whose ``parent`` rows lead back to a start, rows 0 to M - 1), or every reachable state is
+    seen (-1). ``hits[k]`` counts the occupied cells under the footprint at heading
     ``k``, ``hits[16 + k]`` under it half way from heading ``k`` to ``k + 1``, ``hits[32]``
     under the turn-all-round disc. ``seen`` (all False) is left all False again."""
     n_k = steps.shape[0]
     n_r, n_c = hits.shape[1], hits.shape[2]
-    queue[0, 0], queue[0, 1], queue[0, 2] = start[0], start[1], start[2]
-    seen[start[0], start[1], start[2]] = True
-    parent[0] = -1
-    head, tail = 0, 1
+    tail = 0
+    for m in range(starts.shape[0]):
+        k0, r0, c0 = starts[m, 0], starts[m, 1], starts[m, 2]
+        if seen[k0, r0, c0]:
+            continue
+        queue[tail, 0], queue[tail, 1], queue[tail, 2] = k0, r0, c0
+        seen[k0, r0, c0] = True
+        parent[tail] = -1
+        tail += 1
+    head = 0
     found = -1
     while head < tail:
         k, r, c = queue[head, 0], queue[head, 1], queue[head, 2]
@@ -111,7 +127,11 @@ class SpotWindow:
     occupied now, kept up to date as spots are put in place (:meth:`add`) or taken away
     (:meth:`remove`): the correlation is linear in the occupancy, so only the cells that
     change are convolved. :meth:`reachable` asks whether a skid gets into a spot with the
-    spots in place as obstacles. Parameters as :func:`spot_reach`.
+    spots in place as obstacles. Parameters as :func:`spot_reach`; with ``pieces`` (the static
+    solids, ``(S, 4, 2)``) and ``max_cell_m`` the window is searched on cells at most that
+    big, its walls made from the pieces (:func:`swarmpark.core.gridmap.refine_occupancy`);
+    with ``goal_tol_m`` a spot also counts as reached from the free cells that near its own,
+    at its heading.
     """
 
     def __init__(
@@ -124,6 +144,9 @@ class SpotWindow:
         *,
         margin_m: float = 3.0,
         grow_m: float = 0.02,
+        pieces: np.ndarray | None = None,
+        max_cell_m: float | None = None,
+        goal_tol_m: float = 0.0,
     ) -> None:
         poses = np.asarray(poses, float)
         reach = max(f.reach_m for f in footprints)
@@ -135,9 +158,13 @@ class SpotWindow:
         c1 = min(int(np.ceil((hi[0] - origin[0]) / res)), w)
         r1 = min(int(np.ceil((hi[1] - origin[1]) / res)), h)
         self.origin = np.array([origin[0] + c0 * res, origin[1] + r0 * res])
-        self.res, self.grow_m = res, grow_m
-        self.poses, self.footprints = poses, list(footprints)
         walls = np.asarray(occupied[r0:r1, c0:c1], bool)
+        split = 1 if max_cell_m is None else int(np.ceil(res / max_cell_m - 1e-9))
+        if split > 1 and pieces is not None:
+            walls = refine_occupancy(walls, self.origin, res, split, pieces)
+            res = res / split
+        self.res, self.grow_m, self.goal_tol_m = res, grow_m, goal_tol_m
+        self.poses, self.footprints = poses, list(footprints)
         n = len(poses)
         # How many things cover each cell (walls count n + 1, so they never clear).
         self.count = walls.astype(np.int32) * (n + 1)
@@ -191,12 +218,17 @@ class SpotWindow:
         empty array for a spot off the window."""
         masks, hits = self._test(self.footprints[j])
         k, r, c = snap_state(self.poses[j], self.origin, self.res)
-        if not (0 <= r < hits.shape[1] and 0 <= c < hits.shape[2]):
+        n_r, n_c = hits.shape[1], hits.shape[2]
+        if not (0 <= r < n_r and 0 <= c < n_c):
             return np.zeros((0, 2))
         keep = hits[k, r, c]
         hits[k, r, c] = 0.0  # the spot itself is clear by the layout's construction
-        start = np.array([k, r, c], np.int64)
-        end = _flood(hits, HEADING_STEPS, start, self.seen, self.queue, self.parent)
+        # Also from the free cells beside it within goal_tol_m (as the manoeuvre planner
+        # ends there: swarmpark.plan.lattice.plan_manoeuvre).
+        rows, cols, _ = cells_near(r, c, self.goal_tol_m, self.res, (n_r, n_c))
+        ok = hits[k, rows, cols] < 0.5
+        starts = np.column_stack([np.full(int(ok.sum()), k), rows[ok], cols[ok]]).astype(np.int64)
+        end = _flood(hits, HEADING_STEPS, starts, self.seen, self.queue, self.parent)
         hits[k, r, c] = keep
         if end < 0:
             return None
@@ -231,6 +263,7 @@ def spot_reach(
     *,
     margin_m: float = 3.0,
     grow_m: float = 0.02,
+    finer: dict | None = None,
 ) -> list[SpotReach]:
     """The spots of a layout that no manoeuvre reaches in fill order (empty when all do).
 
@@ -247,13 +280,25 @@ def spot_reach(
     margin_m
         The search window is the spots' bounding box grown by this; a skid that reaches the
         window's edge counts as out.
+    finer
+        ``pieces``, ``max_cell_m``, ``goal_tol_m`` of :class:`SpotWindow`: if a spot is
+        flagged on the map's cells, the spots are checked again so (the flags are then
+        those).
     """
-    win = SpotWindow(occupied, origin, res, poses, footprints, margin_m=margin_m, grow_m=grow_m)
     out: list[SpotReach] = []
-    for n, j in enumerate(fill_order):
-        if not win.reachable(j):
-            out.append(win.flag(j, n))
-        win.add(j)
+    for window in ({}, finer):
+        if window is None:
+            break
+        win = SpotWindow(
+            occupied, origin, res, poses, footprints, margin_m=margin_m, grow_m=grow_m, **window
+        )
+        out = []
+        for n, j in enumerate(fill_order):
+            if not win.reachable(j):
+                out.append(win.flag(j, n))
+            win.add(j)
+        if not out:
+            break
     return out
 
 
@@ -331,6 +376,12 @@ def manoeuvre_blocks(win: SpotWindow, order: tuple[int, ...]) -> tuple[tuple[int
 
 
 _K = len(HEADING_STEPS)
+
+#: The supervisor's spot checks search cells this fine and count a spot reached this near
+#: its cell, as the manoeuvre planner does by default (``ManoeuvreParams.max_cell_m``,
+#: ``goal_tol_m``): the check says what the skids' manoeuvres can do.
+SPOT_CELL_M = 0.05
+SPOT_GOAL_TOL_M = 0.05
 
 
 def _masks(fp: Footprint, res: float, grow_m: float) -> np.ndarray:

@@ -299,7 +299,14 @@ class CommandsMixin:
         later (:func:`swarmpark.plan.spot_reach.spot_reach`)."""
         grid = self.park_map.grid()
         return partial(
-            spot_reach, grid.occupied, grid.origin, grid.resolution_m, goals, list(fps), order
+            spot_reach,
+            grid.occupied,
+            grid.origin,
+            grid.resolution_m,
+            goals,
+            list(fps),
+            order,
+            finer=self._spot_window(),
         )
 
     def apply_park(self, plan: ParkPlan | str) -> Outcome:

@@ -29,7 +29,13 @@ from swarmpark.metrics import (
     MetricsRecorder,
     goal_errors,
 )
-from swarmpark.plan.spot_reach import SpotWindow, manoeuvre_blocks, manoeuvre_order
+from swarmpark.plan.spot_reach import (
+    SPOT_CELL_M,
+    SPOT_GOAL_TOL_M,
+    SpotWindow,
+    manoeuvre_blocks,
+    manoeuvre_order,
+)
 from swarmpark.sim.link import SimLink
 from swarmpark.sim.simulator import Simulator, StepResult
 from swarmpark.supervisor import fill_order, reports
@@ -257,8 +263,14 @@ class Supervisor(CommandsMixin):
         flags, lattice = None, ()
         if r is not None:
             grid = self.park_map.grid()
-            win = SpotWindow(grid.occupied, grid.origin, grid.resolution_m, goals, list(fps))
+            args = (grid.occupied, grid.origin, grid.resolution_m, goals, list(fps))
+            win = SpotWindow(*args)
             found, stuck = manoeuvre_order(win, order)
+            if stuck:
+                # Some spot is out of reach on the map's cells: ask again on the manoeuvre
+                # planner's (several times the work, so only then).
+                win = SpotWindow(*args, **self._spot_window())
+                found, stuck = manoeuvre_order(win, order)
             if not stuck:
                 # With spots no order reaches, the layout's is kept (filling those first
                 # made the skids try the hopeless spots first: measured, see the docs).
@@ -270,6 +282,12 @@ class Supervisor(CommandsMixin):
                 tuple(sorted(set(a) | set(b))) for a, b in zip(blocks, lattice, strict=True)
             )
         return order, blocks, r, flags
+
+    def _spot_window(self) -> dict:
+        """How the spot checks search (:class:`~swarmpark.plan.spot_reach.SpotWindow`): on
+        the manoeuvre planner's cells, with the walls from the solids the skids avoid."""
+        pieces = self.sensing.static_view if self.sensing is not None else self._static_pieces
+        return {"pieces": pieces, "max_cell_m": SPOT_CELL_M, "goal_tol_m": SPOT_GOAL_TOL_M}
 
     def held(self) -> np.ndarray:
         """Robots the fill order holds back (:func:`.fill_order.holds`): outside their

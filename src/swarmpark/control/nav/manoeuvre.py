@@ -20,6 +20,7 @@ import numpy as np
 from swarmpark.control.base import ControlView
 from swarmpark.control.nav.params import ManoeuvreParams
 from swarmpark.core.geometry import wrap_angle
+from swarmpark.core.gridmap import refine_occupancy
 from swarmpark.core.progress import NAV_HEADING_LEVER_M, remaining_m
 from swarmpark.plan.lattice import footprint_clear, plan_manoeuvre, stamp_footprint
 
@@ -188,7 +189,9 @@ class ManoeuvrePlanner:
         # again (a generated open deck: 50 s, to the end of the run).
         split = int(np.ceil(res / p.max_cell_m - 1e-9))
         if split > 1:
-            occ = np.repeat(np.repeat(occ, split, axis=0), split, axis=1)
+            # The walls on the finer cells from the solids the monitor checks against, not
+            # the coarse cells split: those err outwards by up to a whole coarse cell.
+            occ = refine_occupancy(occ, origin, res, split, view.static_pieces)
             res = res / split
         for j in range(len(view.poses)):
             if j != i and (leave_out is None or not leave_out[j]):
@@ -244,6 +247,7 @@ class ManoeuvrePlanner:
             "grow_m": grow_m,
             "reverse_cost": p.reverse_cost,
             "budget": p.budget,
+            "goal_tol_m": p.goal_tol_m,
         }
         pose, goal = view.poses[i], view.goals[i]
         plan = plan_manoeuvre(occ, origin, res, fp, pose, goal, **kw)
@@ -319,7 +323,10 @@ class ManoeuvrePlanner:
                 u = np.array([np.cos(b[2]), np.sin(b[2])])
                 along = float(np.dot(b[:2] - pose[:2], u)) * d
                 if along > p.done_m:
-                    rel = pose[:2] - a[:2]
+                    # Off the line through the run's end (the same line as through its
+                    # start, but for the last run to the exact goal, which may start a
+                    # little beside the goal's axis: plan_manoeuvre's goal_tol_m).
+                    rel = pose[:2] - b[:2]
                     lateral = float(u[0] * rel[1] - u[1] * rel[0])  # left of the run: > 0
                     aim = b[2] - d * np.arctan(p.k_lateral * lateral)
                     err = wrap_angle(aim - pose[2])

@@ -211,6 +211,9 @@ class ManoeuvreParams:
     #: Reverse moves cost this much more than forward ones; the search's expansion budget.
     reverse_cost: float = 1.5
     budget: int = 400_000
+    #: The search may end this far from the goal's cell, at the goal's heading (half the
+    #: parking tolerance; the docking closes it): :func:`swarmpark.plan.lattice.plan_manoeuvre`.
+    goal_tol_m: float = 0.05
     #: Dropped when the monitor holds it still this long, or when a segment takes longer
     #: than ``timeout_factor`` times its time at the manoeuvre's speed plus ``timeout_s``;
     #: tried again after ``retry_s``.
@@ -244,7 +247,7 @@ class ManoeuvreParams:
         _check(self, {"near_goal_m": ">=0", "near_stuck_s": ">0"})
         _check(self, {"roam_m": ">0", "escape_step_m": ">0", "escape_max_m": ">=0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
-        _check(self, {"max_cell_m": ">0"})
+        _check(self, {"max_cell_m": ">0", "goal_tol_m": ">=0"})
         _check(
             self, {"grow_m": ">=0", "roomy_grow_m": ">=0", "reverse_cost": ">0", "budget": "int>0"}
         )
