@@ -222,23 +222,37 @@ class ManoeuvrePlanner:
                 if segments:
                     break
         if not segments:
-            st.failed += 1
             # Walled in by settled skids: a way exists with them left out.
             others = settled is not None and np.any(np.delete(settled, i))
             if win is not None and others and not st.walled:
                 occ = self._window(view, i, leave_out=settled)
                 st.walled = bool(self._plan(view, i, *occ, p.grow_m))
+            if win is not None and not st.walled and p.goal_tol_m > 0:
+                # Last, where the walls alone leave no way to the goal's cell, a way that ends
+                # beside it (a spot by a wall reached only along a line of cell centres beside
+                # its own). Not where other skids are what is in the way: they move, and a
+                # skid parked a few cm off its spot narrows its neighbours' (the suite's
+                # walled-in row: a neighbour that had made room could not get back in).
+                bare = self._window(view, i, leave_out=np.ones(len(view.poses), dtype=bool))
+                if bare is not None and not self._plan(view, i, *bare, p.grow_m):
+                    segments = self._plan(view, i, *win, p.grow_m, p.goal_tol_m)
+        if not segments:
+            st.failed += 1
             st.stop(view.t, p.retry_s)
             return
         st.segments, st.seg, st.blocked_s = segments, 0, 0.0
         st.seg_deadline = np.inf
         st.goal = view.goals[i].copy()
 
-    def _plan(self, view: ControlView, i: int, occ, origin, res, grow_m: float) -> list | None:
-        """The segments of a manoeuvre from where skid ``i`` stands; a wedged skid (its
-        footprint not clear at the nearest grid heading) first backs or drives straight out
-        along its own heading to the nearest clear pose (found on a generated L-bay: a skid
-        2.5 cm from a parked neighbour whose every planned first turn the monitor refused)."""
+    def _plan(
+        self, view: ControlView, i: int, occ, origin, res, grow_m: float, goal_tol_m: float = 0.0
+    ) -> list | None:
+        """The segments of a manoeuvre from where skid ``i`` stands (ending within
+        ``goal_tol_m`` of the goal's cell, :func:`~swarmpark.plan.lattice.plan_manoeuvre`); a
+        wedged skid (its footprint not clear at the nearest grid heading) first backs or
+        drives straight out along its own heading to the nearest clear pose (found on a
+        generated L-bay: a skid 2.5 cm from a parked neighbour whose every planned first turn
+        the monitor refused)."""
         p = self.params
         fp = view.footprints[i]
         kw = {
@@ -247,7 +261,7 @@ class ManoeuvrePlanner:
             "grow_m": grow_m,
             "reverse_cost": p.reverse_cost,
             "budget": p.budget,
-            "goal_tol_m": p.goal_tol_m,
+            "goal_tol_m": goal_tol_m,
         }
         pose, goal = view.poses[i], view.goals[i]
         plan = plan_manoeuvre(occ, origin, res, fp, pose, goal, **kw)

@@ -211,8 +211,9 @@ class ManoeuvreParams:
     #: Reverse moves cost this much more than forward ones; the search's expansion budget.
     reverse_cost: float = 1.5
     budget: int = 400_000
-    #: The search may end this far from the goal's cell, at the goal's heading (half the
-    #: parking tolerance; the docking closes it): :func:`swarmpark.plan.lattice.plan_manoeuvre`.
+    #: When the walls alone leave no way to the goal's cell, one that ends this far from it
+    #: at the goal's heading is searched for (half the parking tolerance; the docking closes
+    #: it): :func:`swarmpark.plan.lattice.plan_manoeuvre`.
     goal_tol_m: float = 0.05
     #: Dropped when the monitor holds it still this long, or when a segment takes longer
     #: than ``timeout_factor`` times its time at the manoeuvre's speed plus ``timeout_s``;
