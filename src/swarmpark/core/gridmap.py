@@ -240,50 +240,45 @@ def _rasterize(poly: Polygon, grid: OccupancyGrid) -> np.ndarray:
     """Cells whose square overlaps the polygon's interior (conservative: partial cells and thin
     walls are marked; a cell that only touches the polygon's edge is not)."""
     mask = np.zeros(grid.shape, dtype=bool)
+    _mark_overlapping(mask, poly, grid.origin, grid.resolution_m)
+    return mask
+
+
+def _mark_overlapping(mask: np.ndarray, poly: Polygon, origin, res: float) -> None:
+    """Set the cells of ``mask`` (cell ``(r, c)`` spanning ``origin + (c, r) res`` to
+    ``origin + (c + 1, r + 1) res``) whose square overlaps ``poly``'s interior (in place)."""
     xmin, ymin, xmax, ymax = poly.bounds
-    lo = grid.world_to_cell(np.array([[xmin, ymin]]))[0]
-    hi = grid.world_to_cell(np.array([[xmax, ymax]]))[0]
-    h, w = grid.shape
-    r0, r1 = max(lo[0], 0), min(hi[0], h - 1)
-    c0, c1 = max(lo[1], 0), min(hi[1], w - 1)
+    h, w = mask.shape
+    r0 = max(int(np.floor((ymin - origin[1]) / res)), 0)
+    r1 = min(int(np.floor((ymax - origin[1]) / res)), h - 1)
+    c0 = max(int(np.floor((xmin - origin[0]) / res)), 0)
+    c1 = min(int(np.floor((xmax - origin[0]) / res)), w - 1)
     if r0 > r1 or c0 > c1:
-        return mask
+        return
     rr, cc = np.mgrid[r0 : r1 + 1, c0 : c1 + 1]
-    rc = np.column_stack([rr.ravel(), cc.ravel()])
-    sq = grid.cell_squares(rc)
-    inset = 1e-6 * grid.resolution_m  # so that sharing an edge is not overlapping
-    boxes = shapely.box(
-        sq[:, 0, 0] + inset, sq[:, 0, 1] + inset, sq[:, 2, 0] - inset, sq[:, 2, 1] - inset
-    )
+    rr, cc = rr.ravel(), cc.ravel()
+    x0, y0 = origin[0] + cc * res, origin[1] + rr * res
+    inset = 1e-6 * res  # so that sharing an edge is not overlapping
+    boxes = shapely.box(x0 + inset, y0 + inset, x0 + res - inset, y0 + res - inset)
     shapely.prepare(poly)
     hit = shapely.intersects(poly, boxes)
-    mask[rc[hit, 0], rc[hit, 1]] = True
-    return mask
+    mask[rr[hit], cc[hit]] = True
 
 
 def rasterize_pieces(
     pieces: np.ndarray, origin: np.ndarray, res: float, shape: tuple[int, int]
 ) -> np.ndarray:
-    """``(H, W)`` bool: the cells of a window (cell ``(r, c)`` spanning ``origin + (c, r) res``
-    to ``origin + (c + 1, r + 1) res``) whose squares overlap one of the convex ``pieces``
-    ``(S, 4, 2)`` (the static solids as the collision monitor knows them), as
-    :func:`_rasterize` marks a polygon."""
-    h, w = shape
-    out = np.zeros((h, w), dtype=bool)
+    """``(H, W)`` bool: the cells of a window (as :func:`_mark_overlapping`) whose squares
+    overlap one of the convex ``pieces`` ``(S, 4, 2)`` (the static solids as the collision
+    monitor knows them), as :func:`_rasterize` marks a polygon."""
+    out = np.zeros(shape, dtype=bool)
     pieces = np.asarray(pieces, float).reshape(-1, 4, 2)
-    if not len(pieces) or h == 0 or w == 0:
-        return out
-    lo = np.floor((pieces.min(axis=1) - origin) / res).astype(int)
-    hi = np.floor((pieces.max(axis=1) - origin) / res).astype(int)
-    inside = (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] < w) & (lo[:, 1] < h)
-    inset = 1e-6 * res  # so that sharing an edge is not overlapping
-    for piece, (c0, r0), (c1, r1) in zip(pieces[inside], lo[inside], hi[inside], strict=True):
-        c0, r0, c1, r1 = max(c0, 0), max(r0, 0), min(c1, w - 1), min(r1, h - 1)
-        rr, cc = np.mgrid[r0 : r1 + 1, c0 : c1 + 1]
-        x0, y0 = origin[0] + cc.ravel() * res, origin[1] + rr.ravel() * res
-        boxes = shapely.box(x0 + inset, y0 + inset, x0 + res - inset, y0 + res - inset)
-        hit = shapely.intersects(shapely.Polygon(piece), boxes)
-        out[rr.ravel()[hit], cc.ravel()[hit]] = True
+    # Only the pieces whose bounding box meets the window (a map image has thousands).
+    lo = (pieces.min(axis=1) - origin) / res
+    hi = (pieces.max(axis=1) - origin) / res
+    meets = (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] < shape[1]) & (lo[:, 1] < shape[0])
+    for piece in pieces[meets]:
+        _mark_overlapping(out, shapely.Polygon(piece), origin, res)
     return out
 
 

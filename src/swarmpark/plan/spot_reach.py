@@ -33,8 +33,6 @@ from swarmpark.plan.lattice import (
 )
 
 __all__ = [
-    "SPOT_CELL_M",
-    "SPOT_GOAL_TOL_M",
     "SpotReach",
     "SpotWindow",
     "as_report",
@@ -376,12 +374,6 @@ def manoeuvre_blocks(win: SpotWindow, order: tuple[int, ...]) -> tuple[tuple[int
 
 
 _K = len(HEADING_STEPS)
-
-#: The supervisor's spot checks search cells this fine and count a spot reached this near
-#: its cell, as the manoeuvre planner does by default (``ManoeuvreParams.max_cell_m``,
-#: ``goal_tol_m``): the check says what the skids' manoeuvres can do.
-SPOT_CELL_M = 0.05
-SPOT_GOAL_TOL_M = 0.05
 
 
 def _masks(fp: Footprint, res: float, grow_m: float) -> np.ndarray:

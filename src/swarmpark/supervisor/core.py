@@ -29,13 +29,7 @@ from swarmpark.metrics import (
     MetricsRecorder,
     goal_errors,
 )
-from swarmpark.plan.spot_reach import (
-    SPOT_CELL_M,
-    SPOT_GOAL_TOL_M,
-    SpotWindow,
-    manoeuvre_blocks,
-    manoeuvre_order,
-)
+from swarmpark.plan.spot_reach import SpotWindow, manoeuvre_blocks, manoeuvre_order
 from swarmpark.sim.link import SimLink
 from swarmpark.sim.simulator import Simulator, StepResult
 from swarmpark.supervisor import fill_order, reports
@@ -284,10 +278,14 @@ class Supervisor(CommandsMixin):
         return order, blocks, r, flags
 
     def _spot_window(self) -> dict:
-        """How the spot checks search (:class:`~swarmpark.plan.spot_reach.SpotWindow`): on
-        the manoeuvre planner's cells, with the walls from the solids the skids avoid."""
+        """How the spot checks search (:class:`~swarmpark.plan.spot_reach.SpotWindow`): as
+        the manoeuvre planner does by default (its cell size and goal tolerance), with the
+        walls from the solids the skids avoid: the check says what the manoeuvres can do."""
+        from swarmpark.control.nav.params import ManoeuvreParams
+
         pieces = self.sensing.static_view if self.sensing is not None else self._static_pieces
-        return {"pieces": pieces, "max_cell_m": SPOT_CELL_M, "goal_tol_m": SPOT_GOAL_TOL_M}
+        mp = ManoeuvreParams()
+        return {"pieces": pieces, "max_cell_m": mp.max_cell_m, "goal_tol_m": mp.goal_tol_m}
 
     def held(self) -> np.ndarray:
         """Robots the fill order holds back (:func:`.fill_order.holds`): outside their
