@@ -226,3 +226,28 @@ def test_deadlocks_are_split_by_where_they_were_reported(tmp_path):
         summarize(records_table(tmp_path, ["a", "b"]))["overall"]["deadlocks_parking"].iloc[0]
         is None
     )
+
+
+def test_the_summary_gives_skids_parked_p95_and_a_table_per_fleet_size(tmp_path):
+    def record(jid, n, parked, ratio):
+        robots = {f"r{k}": {"commanded": True, "parked": k < parked} for k in range(n)}
+        res = {"success": parked == n, "collisions": [], "deadlocks": [], "robots": robots,
+               "time_to_park_s": None if parked < n else 10.0 * ratio, "lower_bound_s": 10.0}  # fmt: skip
+        job = {"job_id": jid, "kind": "door", "source": "generate:door", "seed": 0,
+               "robots": None, "duration_s": None, "params": {}}  # fmt: skip
+        return {"job": job, "error": None, "wall_s": 1.0, "attempts": 1, "result": res}
+
+    (tmp_path / "records").mkdir()
+    runs = {"a": (4, 4, 1.2), "b": (8, 6, None), "c": (25, 25, 2.0), "d": (30, 29, None)}
+    for jid, (n, parked, ratio) in runs.items():
+        (tmp_path / "records" / f"{jid}.json").write_text(json.dumps(record(jid, n, parked, ratio)))
+    tables = summarize(records_table(tmp_path, list(runs)))
+    overall = tables["overall"].iloc[0]
+    assert overall["skids_parked"] == pytest.approx(64 / 67)
+    assert overall["ratio_p95"] == pytest.approx(1.2 + 0.95 * 0.8)
+    fleet = tables["fleet"].set_index("fleet")
+    assert fleet.index.tolist() == ["1-10", "21-30"]
+    assert fleet.loc["1-10", "success_rate"] == 0.5 and fleet.loc["21-30", "jobs"] == 2
+    assert fleet.loc["1-10", "skids_parked"] == pytest.approx(10 / 12)
+    # One band only: no fleet table.
+    assert "fleet" not in summarize(records_table(tmp_path, ["a", "b"]))

@@ -103,14 +103,18 @@ def _group_stats(g: pd.DataFrame) -> dict:
     coll = ok["n_collisions"] if "n_collisions" in ok else pd.Series(dtype=float)
     dead = ok["n_deadlocks"] if "n_deadlocks" in ok else pd.Series(dtype=float)
     parking = ok["n_deadlocks_parking"] if "n_deadlocks_parking" in ok else pd.Series(dtype=float)
+    skids = ok["n_robots"].sum() if "n_robots" in ok else 0
     return {
         "jobs": len(g),
         "errors": int(g["error"].notna().sum()),
         "success_rate": float(g["parked"].mean()) if len(g) else float("nan"),
+        # Of the skids of the runs that have a result, the share parked.
+        "skids_parked": float(ok["n_parked"].sum() / skids) if skids else None,
         "runs_with_collision": int((coll > 0).sum()),
         "collisions": int(coll.sum()),
         "ratio_p50": float(np.median(ratio)) if len(ratio) else None,
         "ratio_p90": float(np.percentile(ratio, 90)) if len(ratio) else None,
+        "ratio_p95": float(np.percentile(ratio, 95)) if len(ratio) else None,
         "deadlocks": int(dead.sum()),
         # Of those, reported within PARKING_M of the goal (None if a result lacks it).
         "deadlocks_parking": int(parking.sum()) if len(parking) and parking.notna().all() else None,
@@ -118,12 +122,34 @@ def _group_stats(g: pd.DataFrame) -> dict:
     }
 
 
+#: Fleet-size bands of the ``fleet`` table (upper ends, inclusive).
+FLEET_BANDS = (10, 20, 30)
+
+
+def _fleet_band(n) -> str | None:
+    """The band of a fleet of ``n`` skids, as "4-10" style text (None for no result)."""
+    if n is None or pd.isna(n):
+        return None
+    lo = 1
+    for hi in FLEET_BANDS:
+        if n <= hi:
+            return f"{lo}-{hi}"
+        lo = hi + 1
+    return f"{lo}+"
+
+
 def summarize(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
-    """Summary tables: ``overall``, ``kind`` and one per swept parameter."""
+    """Summary tables: ``overall``, ``kind``, ``fleet`` (per band of fleet sizes,
+    :data:`FLEET_BANDS`, when the runs span more than one) and one per swept parameter."""
     if df.empty:
         return {}
     tables = {"overall": pd.DataFrame([{"group": "all", **_group_stats(df)}])}
-    for col in ["kind"] + [c for c in df.columns if c.startswith("param.")]:
+    cols = ["kind"]
+    if "n_robots" in df:
+        df = df.assign(fleet=df["n_robots"].map(_fleet_band))
+        if df["fleet"].nunique() > 1:
+            cols.append("fleet")
+    for col in cols + [c for c in df.columns if c.startswith("param.")]:
         rows = [{col: k, **_group_stats(g)} for k, g in df.groupby(col, sort=True, dropna=False)]
         tables[col] = pd.DataFrame(rows)
     return tables
