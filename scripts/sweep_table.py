@@ -16,3 +16,5 @@ path = sys.argv[1] if len(sys.argv) > 1 else "sweeps/results/generated-100.parqu
 tables = summarize(pd.read_parquet(path))
 print(markdown(tables["overall"]))
 print(markdown(tables["kind"]), end="")
+if "fleet" in tables:  # fleets of more than one size band
+    print("\n" + markdown(tables["fleet"]), end="")
