@@ -127,7 +127,7 @@ FLEET_BANDS = (10, 20, 30)
 
 
 def _fleet_band(n) -> str | None:
-    """The band of a fleet of ``n`` skids, as "4-10" style text (None for no result)."""
+    """The band of a fleet of ``n`` skids, as "1-10" style text (None for no result)."""
     if n is None or pd.isna(n):
         return None
     lo = 1
