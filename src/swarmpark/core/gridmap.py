@@ -296,9 +296,12 @@ def refine_occupancy(
     up = np.repeat(np.repeat(np.asarray(occ, bool), split, axis=0), split, axis=1)
     if split <= 1:
         return up
-    covered = rasterize_pieces(pieces, origin, res, occ.shape)
-    keep_whole = np.repeat(np.repeat(~covered, split, axis=0), split, axis=1)
     fine = rasterize_pieces(pieces, origin, res / split, up.shape)
+    # A coarse cell a piece overlaps is one with a fine cell a piece overlaps (its square is
+    # theirs put together): no second rasterization at the coarse size.
+    h, w = occ.shape
+    covered = fine.reshape(h, split, w, split).any(axis=(1, 3))
+    keep_whole = np.repeat(np.repeat(~covered, split, axis=0), split, axis=1)
     return up & (fine | keep_whole)
 
 
