@@ -39,6 +39,7 @@ __all__ = [
     "manoeuvre_blocks",
     "manoeuvre_order",
     "spot_reach",
+    "spot_windows",
 ]
 
 
@@ -284,12 +285,8 @@ def spot_reach(
         those).
     """
     out: list[SpotReach] = []
-    for window in ({}, finer):
-        if window is None:
-            break
-        win = SpotWindow(
-            occupied, origin, res, poses, footprints, margin_m=margin_m, grow_m=grow_m, **window
-        )
+    args = (occupied, origin, res, poses, footprints)
+    for win in spot_windows(*args, finer=finer, margin_m=margin_m, grow_m=grow_m):
         out = []
         for n, j in enumerate(fill_order):
             if not win.reachable(j):
@@ -298,6 +295,26 @@ def spot_reach(
         if not out:
             break
     return out
+
+
+def spot_windows(
+    occupied: np.ndarray,
+    origin: np.ndarray,
+    res: float,
+    poses: np.ndarray,
+    footprints: list[Footprint],
+    *,
+    finer: dict | None = None,
+    **kwargs,
+):
+    """The :class:`SpotWindow` of the spots on the map's cells, then (when the caller asks
+    for the next one, having found a spot out of reach there) with ``finer`` (``pieces``,
+    ``max_cell_m``, ``goal_tol_m``): the manoeuvre planner's cells, several times the work,
+    so only then. ``kwargs`` go to both windows."""
+    args = (occupied, origin, res, poses, footprints)
+    yield SpotWindow(*args, **kwargs)
+    if finer is not None:
+        yield SpotWindow(*args, **kwargs, **finer)
 
 
 def manoeuvre_order(

@@ -29,7 +29,7 @@ from swarmpark.metrics import (
     MetricsRecorder,
     goal_errors,
 )
-from swarmpark.plan.spot_reach import SpotWindow, manoeuvre_blocks, manoeuvre_order
+from swarmpark.plan.spot_reach import manoeuvre_blocks, manoeuvre_order, spot_windows
 from swarmpark.sim.link import SimLink
 from swarmpark.sim.simulator import Simulator, StepResult
 from swarmpark.supervisor import fill_order, reports
@@ -258,13 +258,12 @@ class Supervisor(CommandsMixin):
         if r is not None:
             grid = self.park_map.grid()
             args = (grid.occupied, grid.origin, grid.resolution_m, goals, list(fps))
-            win = SpotWindow(*args)
-            found, stuck = manoeuvre_order(win, order)
-            if stuck:
-                # Some spot is out of reach on the map's cells: ask again on the manoeuvre
-                # planner's (several times the work, so only then).
-                win = SpotWindow(*args, **self._spot_window())
+            # On the map's cells; if some spot is out of reach there, on the manoeuvre
+            # planner's.
+            for win in spot_windows(*args, finer=self._spot_window()):
                 found, stuck = manoeuvre_order(win, order)
+                if not stuck:
+                    break
             if not stuck:
                 # With spots no order reaches, the layout's is kept (filling those first
                 # made the skids try the hopeless spots first: measured, see the docs).
