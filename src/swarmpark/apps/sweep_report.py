@@ -187,7 +187,7 @@ def markdown(df: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _plots(df: pd.DataFrame, tables: dict, out_dir: Path) -> list[Path]:
+def _plots(df: pd.DataFrame, tables: dict, out_dir: Path, prefix: str = "") -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -203,7 +203,7 @@ def _plots(df: pd.DataFrame, tables: dict, out_dir: Path) -> list[Path]:
         ax.set_title(f"success rate per {key}")
         ax.tick_params(axis="x", rotation=45)
     fig.tight_layout()
-    paths.append(out_dir / "success.png")
+    paths.append(out_dir / f"{prefix}success.png")
     fig.savefig(paths[-1], dpi=90)
     plt.close(fig)
     if "time_over_bound" in df:
@@ -216,13 +216,13 @@ def _plots(df: pd.DataFrame, tables: dict, out_dir: Path) -> list[Path]:
             ax.set_ylabel("time to park / lower bound")
             ax.tick_params(axis="x", rotation=45)
             fig.tight_layout()
-            paths.append(out_dir / "time_over_bound.png")
+            paths.append(out_dir / f"{prefix}time_over_bound.png")
             fig.savefig(paths[-1], dpi=90)
             plt.close(fig)
     return paths
 
 
-def _lost_plot(lost: pd.DataFrame, out_dir: Path) -> Path:
+def _lost_plot(lost: pd.DataFrame, out_dir: Path, prefix: str = "") -> Path:
     """A stacked bar per kind of :func:`time_lost`."""
     import matplotlib
 
@@ -239,10 +239,23 @@ def _lost_plot(lost: pd.DataFrame, out_dir: Path) -> Path:
     ax.tick_params(axis="x", rotation=45)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
-    path = out_dir / "time_lost.png"
+    path = out_dir / f"{prefix}time_lost.png"
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def write_plots(df: pd.DataFrame, out_dir: Path, prefix: str = "") -> list[Path]:
+    """The summary's figures of a sweep's table ``df`` (success rates, time over the bound,
+    time lost), written to ``out_dir`` as ``{prefix}success.png`` and so on."""
+    if df.empty:
+        return []
+    tables = summarize(df)
+    plots = _plots(df, tables, out_dir, prefix) if tables else []
+    lost = time_lost(df)
+    if lost is not None:
+        plots.append(_lost_plot(lost, out_dir, prefix))
+    return plots
 
 
 def write_report(out_dir: Path, job_ids: list[str], name: str) -> dict:
@@ -266,9 +279,7 @@ def write_report(out_dir: Path, job_ids: list[str], name: str) -> dict:
             "\n## time lost per skid (s) against top speed, by what it was doing\n\n",
             markdown(lost),
         ]
-    plots = _plots(df, tables, out_dir) if tables else []
-    if lost is not None:
-        plots.append(_lost_plot(lost, out_dir))
+    plots = write_plots(df, out_dir)
     md += [f"\n![{p.stem}]({p.name})\n" for p in plots]
     summary = out_dir / "summary.md"
     summary.write_text("".join(md))
