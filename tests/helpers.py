@@ -1,7 +1,10 @@
 """Helpers for the tests: tiny worlds built from dicts, scripted controllers, a small room
-and a route driven through it for the sensing tests."""
+and a route driven through it for the sensing tests; the repository's scripts as modules."""
 
 from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
 
 import numpy as np
 from shapely.geometry import Polygon, box
@@ -9,6 +12,16 @@ from shapely.geometry import Polygon, box
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import OccupancyGrid, grid_from_walls
 from swarmpark.world.scenario import build_world, parse_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def load_script(name: str):
+    """``scripts/<name>.py`` of the repository, imported as a module."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def make_world(**overrides):

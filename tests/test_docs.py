@@ -3,12 +3,12 @@ results points at a file that is there; a sweep's summary is published with its 
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
 from pathlib import Path
 
 import pytest
+from helpers import load_script
 
 from swarmpark.apps.sweep_report import records_table
 
@@ -36,15 +36,6 @@ def test_every_relative_link_points_at_a_file(page):
     assert not missing, f"{page.relative_to(ROOT)}: links to missing files {missing}"
 
 
-def _publish_module():
-    spec = importlib.util.spec_from_file_location(
-        "publish_sweep", ROOT / "scripts" / "publish_sweep.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_a_published_summary_links_its_own_figures(tmp_path):
     out, results = tmp_path / "out", tmp_path / "results"
     out.mkdir()
@@ -62,7 +53,7 @@ def test_a_published_summary_links_its_own_figures(tmp_path):
     table = records_table(out, ["a", "b"])
     table.to_parquet(out / "results.parquet", index=False)
     (out / "summary.md").write_text("# Sweep s\n\n![success](success.png)\n")
-    plots = _publish_module().publish("s", out, results)
+    plots = load_script("publish_sweep").publish("s", out, results)
     names = sorted(p.name for p in plots)
     assert names == ["s-success.png", "s-time_lost.png", "s-time_over_bound.png"]
     assert all((results / n).is_file() for n in names)
@@ -75,7 +66,7 @@ def test_a_published_summary_links_its_own_figures(tmp_path):
     ]
     assert (results / "s.parquet").is_file()
     # Again, from the committed table alone: the same figures, linked once.
-    _publish_module().publish("s", None, results)
+    load_script("publish_sweep").publish("s", None, results)
     assert _relative_links(results / "s.md") == [
         "s-success.png",
         "s-time_over_bound.png",

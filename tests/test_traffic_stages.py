@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import pytest
+from helpers import load_script
 
 from swarmpark.apps.run import run_world
 from swarmpark.world.scenario import build_world, load_scenario
@@ -13,17 +13,8 @@ from swarmpark.world.scenario import build_world, load_scenario
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location(
-        "traffic_stages", ROOT / "scripts" / "traffic_stages.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_the_stages_add_up_to_the_time_lost_in_traffic():
-    mod = _script()
+    mod = load_script("traffic_stages")
     obs = mod.StageObserver()
     world = build_world(load_scenario(ROOT / "scenarios" / "l-shape-obstacle.yaml"))
     result = run_world(world, observers=[obs]).result
