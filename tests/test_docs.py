@@ -8,11 +8,10 @@ import re
 from pathlib import Path
 
 import pytest
-from helpers import load_script
+from helpers import ROOT, load_script
 
 from swarmpark.apps.sweep_report import records_table
 
-ROOT = Path(__file__).resolve().parent.parent
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 
@@ -59,16 +58,9 @@ def test_a_published_summary_links_its_own_figures(tmp_path):
     assert all((results / n).is_file() for n in names)
     text = (results / "s.md").read_text()
     assert "](success.png)" not in text
-    assert _relative_links(results / "s.md") == [
-        "s-success.png",
-        "s-time_over_bound.png",
-        "s-time_lost.png",
-    ]
+    linked = ["s-success.png", "s-time_over_bound.png", "s-time_lost.png"]
+    assert _relative_links(results / "s.md") == linked
     assert (results / "s.parquet").is_file()
     # Again, from the committed table alone: the same figures, linked once.
     load_script("publish_sweep").publish("s", None, results)
-    assert _relative_links(results / "s.md") == [
-        "s-success.png",
-        "s-time_over_bound.png",
-        "s-time_lost.png",
-    ]
+    assert _relative_links(results / "s.md") == linked

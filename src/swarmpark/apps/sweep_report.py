@@ -250,9 +250,12 @@ def write_plots(df: pd.DataFrame, out_dir: Path, prefix: str = "") -> list[Path]
     time lost), written to ``out_dir`` as ``{prefix}success.png`` and so on."""
     if df.empty:
         return []
-    tables = summarize(df)
+    return _write_plots(df, summarize(df), time_lost(df), out_dir, prefix)
+
+
+def _write_plots(df, tables: dict, lost, out_dir: Path, prefix: str = "") -> list[Path]:
+    """:func:`write_plots` from the tables and time lost already summarized."""
     plots = _plots(df, tables, out_dir, prefix) if tables else []
-    lost = time_lost(df)
     if lost is not None:
         plots.append(_lost_plot(lost, out_dir, prefix))
     return plots
@@ -279,7 +282,7 @@ def write_report(out_dir: Path, job_ids: list[str], name: str) -> dict:
             "\n## time lost per skid (s) against top speed, by what it was doing\n\n",
             markdown(lost),
         ]
-    plots = write_plots(df, out_dir)
+    plots = _write_plots(df, tables, lost, out_dir)
     md += [f"\n![{p.stem}]({p.name})\n" for p in plots]
     summary = out_dir / "summary.md"
     summary.write_text("".join(md))
