@@ -143,3 +143,44 @@ def test_a_held_skid_far_from_its_stop_drives_on_to_it():
     view = replace(view, hold=np.array([False, False]))
     nav.compute(view)
     assert not nav.at_hold.any()
+
+
+def test_a_skid_held_in_a_door_drives_on_out_of_it():
+    # Skid 0 stands in a 1.6 m door (a wall across the hall at x = 5) with its boundary
+    # just past it, and the fill order holds it back: held there, it would stop 0.3 m short
+    # of its boundary, still in the door, and shut it on every skid behind it (the one it
+    # waits for among them: a generated 24-skid door site, one held in the door for 90 s).
+    # A skid standing in a bottleneck zone is let on; a held skid outside one still waits.
+    walls = [(4.85, 0.0, 5.15, 2.2), (4.85, 3.8, 5.15, 6.0)]
+    zone = box(5.6, 0.0, 10.0, 6.0)
+    hold = np.array([True, True])
+    view = make_view(
+        [[4.6, 3.0, 0.0], [1.0, 1.0, 0.0]],
+        [[8.0, 3.0, 0.0], [8.0, 1.0, 0.0]],
+        goal_changed=[True, True],
+        dt=0.05,
+        boxes=walls,
+    )
+    view = replace(view, hold=hold, hold_zones=(zone, zone))
+    nav = Navigator()
+    nav.prepare(view)
+    door = nav.traffic.zones
+    assert door.count == 1 and door.zone_at(view.poses[:, :2]).tolist() == [1, 0]
+    for _ in range(200):
+        cmd = nav.compute(view)
+        view = advance(view, cmd, hold=hold, hold_zones=(zone, zone))
+    assert door.zone_at(view.poses[:1, :2])[0] == 0 and view.poses[0, 0] > 5.6
+    assert view.poses[1, 0] < 5.6 - 0.6  # the other one stays out of its boundary
+
+
+def test_skids_waiting_on_purpose_are_in_a_stuck_skids_repair():
+    # Waiting skids (queued at a door, held at their stop by the fill order) stand still
+    # with their stall watch paused. A stuck skid's repair goes round the skids standing
+    # still; without the waiting ones it planned through a skid the fill order held in front
+    # of it, and pushed against it for 60 s (a generated door site).
+    view = make_view([[2.0, 3.0, 0.0], [4.0, 3.0, 0.0], [6.0, 3.0, 0.0]], [[8.0, 3.0, 0.0]] * 3)
+    nav = Navigator()
+    nav.compute(view)
+    nav.robots[1].traffic.waiting = 1  # queued at a door
+    still = nav._fleet(view).still
+    assert still.tolist() == [False, True, False]
