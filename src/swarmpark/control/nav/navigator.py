@@ -171,7 +171,7 @@ class Navigator:
         idx = np.flatnonzero(view.active)
         if len(idx) == 0:
             return cmd
-        view = self._release_in_zones(self._inherit(view))
+        view = self._inherit(view)
         scene = self.scene.update(view)
         paths = self._states("path")
         if p.avoidance == "rvo":
@@ -348,23 +348,6 @@ class Navigator:
         pr[walled] = pr.max() + 1.0
         return replace(view, priority=pr)
 
-    def _release_in_zones(self, view: ControlView) -> ControlView:
-        """The view without the fill order's holds on skids standing in a bottleneck zone
-        (:mod:`.traffic`): held there, a skid shuts the door on every other skid, the one it
-        waits for among them. A skid is held once it comes nearer its spot than the skid it
-        waits for is to its own, which happens in the door when that one falls behind (a
-        generated 24-skid door site: a skid held in the door for 90 s, 13 of 24 parked). Let
-        in, it may wall that spot in; the walled-in skid then outranks it and it makes room."""
-        if view.hold is None or not view.hold.any() or not self.params.traffic.enabled:
-            return view
-        zones = self.traffic.zones
-        if zones is None or zones.count == 0:
-            return view
-        inside = zones.zone_at(view.poses[:, :2]) > 0
-        if not (view.hold & inside).any():
-            return view
-        return replace(view, hold=view.hold & ~inside)
-
     def _keep_right(self, view, idx, targets, not_cruising, fleet, docked) -> np.ndarray:
         """Monitor mode: the lookahead points of skids ``idx`` following their paths, turned
         clockwise where a skid on the move comes the other way (:mod:`.keep_right`). On the
@@ -473,11 +456,7 @@ class Navigator:
         waiting = np.array([r.traffic.waiting > 0 for r in self.robots], dtype=bool)
         if view.hold is not None and len(self.at_hold) == len(waiting):
             waiting |= view.hold & self.at_hold
-        # Skids waiting on purpose stand still too (their stall watch is paused): a stuck
-        # skid's repair that left them out planned through a skid the fill order held in front
-        # of it, and it pushed against it for 60 s (a generated door site).
-        still = bound & (held | waiting)
-        return FleetState(parked=parked, bound=bound, still=still, waiting=waiting)
+        return FleetState(parked=parked, bound=bound, still=bound & held, waiting=waiting)
 
     def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
         """Commands ``raw`` of skids ``idx`` not driven by this controller (teleop), scaled

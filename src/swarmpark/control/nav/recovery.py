@@ -109,12 +109,8 @@ class BackUp:
         if st.left_m <= 0:
             return None
         st.left_m -= max(abs(v_now) * dt, 0.0) if abs(v_now) > _MOVING_MPS else 0.0
-        if stall.stalled_s >= self.stall_s:
-            # Backing is blocked too: the field tries again for ``stall_s`` before the next
-            # back-up (restarted at once, a skid whose field asked to reverse and turn away
-            # from a wall backed up into it for 150 s on a generated corridor site).
-            st.left_m, stall.stalled_s = 0.0, 0.0
-            return None
+        if stall.stalled_s >= self.stall_s:  # backing is blocked too
+            st.left_m = 0.0
         return (-np.sign(raw_v + 1e-9) * self.params.speed_share * v_max, 0.0)
 
 
