@@ -18,10 +18,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from swarmpark.apps.sweep_report import write_plots
+from swarmpark.apps.sweep_report import figure_links, write_plots
 
 RESULTS = Path(__file__).resolve().parent.parent / "sweeps" / "results"
-#: A figure link of a summary: ``![stem](stem.png)``, with or without a name prefix.
+#: A figure link of a summary (:func:`~swarmpark.apps.sweep_report.figure_links`), with or
+#: without a name prefix.
 FIGURE = re.compile(r"\n!\[[^\]]*\]\([^)\s]*\.png\)\n")
 
 
@@ -39,7 +40,7 @@ def publish(name: str, out_dir: Path | None = None, results: Path = RESULTS) -> 
         raise SystemExit(f"publish_sweep: {table} or {summary} not found")
     plots = write_plots(pd.read_parquet(table), results, prefix=f"{name}-")
     text = FIGURE.sub("", summary.read_text()).rstrip("\n") + "\n"
-    text += "".join(f"\n![{p.stem}]({p.name})\n" for p in plots)
+    text += figure_links(plots)
     summary.write_text(text)
     return plots
 

@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
-from helpers import load_script
+from helpers import ROOT, load_script
 
 from swarmpark.apps.run import run_world
 from swarmpark.world.scenario import build_world, load_scenario
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_the_stages_add_up_to_the_time_lost_in_traffic():

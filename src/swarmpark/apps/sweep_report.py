@@ -245,6 +245,11 @@ def _lost_plot(lost: pd.DataFrame, out_dir: Path, prefix: str = "") -> Path:
     return path
 
 
+def figure_links(plots: list[Path]) -> str:
+    """Markdown links to ``plots``, one paragraph each, as a summary ends with them."""
+    return "".join(f"\n![{p.stem}]({p.name})\n" for p in plots)
+
+
 def write_plots(df: pd.DataFrame, out_dir: Path, prefix: str = "") -> list[Path]:
     """The summary's figures of a sweep's table ``df`` (success rates, time over the bound,
     time lost), written to ``out_dir`` as ``{prefix}success.png`` and so on."""
@@ -283,7 +288,7 @@ def write_report(out_dir: Path, job_ids: list[str], name: str) -> dict:
             markdown(lost),
         ]
     plots = _write_plots(df, tables, lost, out_dir)
-    md += [f"\n![{p.stem}]({p.name})\n" for p in plots]
+    md.append(figure_links(plots))
     summary = out_dir / "summary.md"
     summary.write_text("".join(md))
     return {"table": table, "summary": summary, "plots": plots, "tables": tables, "rows": len(df)}
