@@ -68,6 +68,27 @@ coord = st.floats(-5.0, 5.0, allow_nan=False)
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.tuples(coord, coord), min_size=2, max_size=7))
 def test_arc_length_parameterization_property(points):
+    _check_arc_length(points)
+
+
+@pytest.mark.parametrize(
+    "points",
+    [
+        # Tight turns (radius 1.4 cm, 15 cm, 1.8 cm) that pass the cusp check, found by the
+        # property above: with 16 table intervals per waypoint gap the inverse arc length
+        # was off there and |dp/ds| by up to 7e-3.
+        [(0.0, 0.0), (0.0, 1.0), (2.0, -0.5), (1.0, 3.0), (-0.625, -0.75), (-0.625, 0.0)],
+        [(4.0, 0.0), (-2.5, 0.0), (-2.75, 0.0), (0.0, 0.5), (0.0, 0.0)],
+        [(0.0, 1.0), (0.0, 0.0), (-0.75, 4.0), (-0.28125, 5.0), (0.0, 4.5625), (0.5, 0.0)],
+    ],
+)
+def test_arc_length_parameterization_in_tight_turns(points):
+    p = SplinePath.through(np.array(points))  # passes the cusp check
+    assert np.abs(p.curvature(np.linspace(0.0, p.length_m, 4001))).max() > 6.0
+    _check_arc_length(points)
+
+
+def _check_arc_length(points):
     pts = np.array(points)
     if np.any(np.linalg.norm(np.diff(pts, axis=0), axis=1) < 0.05):
         return  # too close to a duplicate for a meaningful spline

@@ -34,9 +34,12 @@ __all__ = ["PathError", "SplinePath"]
 #: parameterization would divide by their distance.
 MIN_WAYPOINT_SPACING_M = 1e-9
 #: Gauss-Legendre sub-intervals per waypoint interval and nodes per sub-interval. The speed
-#: |r'(u)| is the square root of a quartic in each interval, so 16 x 8 nodes integrate it to
-#: round-off for any sensible spline.
-_SUBINTERVALS = 16
+#: |r'(u)| is the square root of a quartic in each interval, so 8 nodes integrate it to
+#: round-off for any sensible spline. The sub-intervals are also the knots of the Hermite
+#: estimate of the inverse: with 16, in tight turns that pass the cusp check (radius 1.4-15
+#: cm) the two Newton steps started too far off and |dp/ds| was off by up to 7e-3; with 32 by
+#: 4e-6 (tests/test_paths.py), and an evaluation is no slower.
+_SUBINTERVALS = 32
 _GL_NODES = 8
 #: Newton steps that polish the inverse arc length s -> u (quadratic convergence from the
 #: Hermite estimate: two reach round-off on any path that passes the cusp check).
