@@ -60,7 +60,9 @@ def line_scenario(
     robots = []
     for k in range(skids):
         x, y = front - u * k * (length + gap_m)
-        robots.append({"id": f"f{k + 1}", "pose": [float(x), float(y), np.degrees(heading_rad)]})
+        robots.append(
+            {"id": f"f{k + 1}", "pose": [float(x), float(y), float(np.degrees(heading_rad))]}
+        )
     out["robots"] = robots
     park = next(c for c in out["commands"] if "park" in c)
     park["park"]["robots"] = [r["id"] for r in robots]
