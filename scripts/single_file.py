@@ -25,23 +25,14 @@ import yaml
 
 from swarmpark.apps.run import run_world
 from swarmpark.control.nav.params import TrafficParams
-from swarmpark.plan.bottlenecks import find_bottlenecks
+from swarmpark.control.nav.traffic import zones_for
 from swarmpark.world.scenario import build_world, parse_scenario
 
 
 def door_centre(data: dict, base: Path) -> np.ndarray:
     """Centre of the first bottleneck zone of the scenario's map, as the navigator finds it."""
     world = build_world(parse_scenario(data, base))
-    p = TrafficParams()
-    fps = [r.footprint for r in world.robots]
-    width, length = max(f.width_m for f in fps), max(f.length_m for f in fps)
-    zones = find_bottlenecks(
-        world.grid,
-        min_width_m=width,
-        lane_width_m=2.0 * width + p.lane_clearance_m,
-        pad_m=0.5 * length + p.pad_m,
-        resolution_m=max(p.resolution_m, world.grid.resolution_m),
-    )
+    zones = zones_for(world.grid, [r.footprint for r in world.robots], TrafficParams())
     if zones.count == 0:
         raise SystemExit("single_file: the map has no door or narrow corridor; give --door X Y")
     c = zones.polygons[0].centroid

@@ -34,7 +34,22 @@ from swarmpark.control.nav.hold import stop_short
 from swarmpark.control.nav.params import TrafficParams
 from swarmpark.plan.bottlenecks import Bottlenecks, find_bottlenecks
 
-__all__ = ["TrafficControl", "TrafficState"]
+__all__ = ["TrafficControl", "TrafficState", "zones_for"]
+
+
+def zones_for(grid, footprints, p: TrafficParams) -> Bottlenecks:
+    """The zones of ``grid`` for a fleet of ``footprints``: passages wide enough for the
+    widest skid but narrower than two side by side plus ``p.lane_clearance_m``, grown by half
+    the longest skid plus ``p.pad_m``."""
+    width = max(f.width_m for f in footprints)
+    length = max(f.length_m for f in footprints)
+    return find_bottlenecks(
+        grid,
+        min_width_m=width,
+        lane_width_m=2.0 * width + p.lane_clearance_m,
+        pad_m=0.5 * length + p.pad_m,
+        resolution_m=max(p.resolution_m, grid.resolution_m),
+    )
 
 
 @dataclass
@@ -68,16 +83,7 @@ class TrafficControl:
         """The map's bottlenecks for this fleet (recomputed when the map or fleet changes)."""
         fps = tuple(view.footprints)
         if self.zones is None or self._grid is not view.grid or self._fps != fps:
-            p = self.params
-            width = max(f.width_m for f in fps)
-            length = max(f.length_m for f in fps)
-            self.zones = find_bottlenecks(
-                view.grid,
-                min_width_m=width,
-                lane_width_m=2.0 * width + p.lane_clearance_m,
-                pad_m=0.5 * length + p.pad_m,
-                resolution_m=max(p.resolution_m, view.grid.resolution_m),
-            )
+            self.zones = zones_for(view.grid, fps, self.params)
             self._grid, self._fps = view.grid, fps
             self._joins, self._distance = None, {}
         return self.zones
