@@ -14,6 +14,8 @@ from swarmpark.core.gridmap import OccupancyGrid, grid_from_walls
 from swarmpark.world.scenario import build_world, parse_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
+SCENARIOS = ROOT / "scenarios"
+DATA = ROOT / "tests" / "data"
 
 
 def load_script(name: str):

@@ -1,10 +1,9 @@
 """2018 paper, Fig. 7: the Euclidean assignment cost blocks a hallway where the formation
 cost does not (scenarios/hallway-side-room-fig7.yaml; issue 21 item 3)."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from helpers import SCENARIOS
 
 from swarmpark.apps.compare import with_cost
 from swarmpark.apps.run import run_world
@@ -12,7 +11,7 @@ from swarmpark.assign import cost_matrix
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import build_world, load_scenario
 
-SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "hallway-side-room-fig7.yaml"
+SCENARIO = SCENARIOS / "hallway-side-room-fig7.yaml"
 
 
 def _first_assignment(cost: str) -> list[list[float]]:

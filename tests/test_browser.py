@@ -12,11 +12,11 @@ from pathlib import Path
 
 import liveserver
 import pytest
+from helpers import DATA, ROOT
 from liveserver import BROWSER_MARKS, chromium
 
-DATA = Path(__file__).parent / "data"
 SMALL = DATA / "ui-small.yaml"
-ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
+ARTIFACTS = ROOT / "test-artifacts"
 TOKEN = "browser-token"
 ROBOTS = ["s1", "s2", "s3", "s4"]
 BOX = [(6.5, 2.0), (10.5, 2.0), (10.5, 6.0), (6.5, 6.0)]
@@ -384,7 +384,7 @@ def test_click_shift_click_pan_and_zoom(page, server):
 # ----------------------------------------------------------------------------- operator safety
 
 
-DOCS_IMG = Path(__file__).parents[1] / "docs" / "img"
+DOCS_IMG = ROOT / "docs" / "img"
 
 
 @pytest.mark.parametrize("width", [800, 1024, 1366])

@@ -12,14 +12,13 @@ from __future__ import annotations
 import math
 import os
 import time
-from pathlib import Path
 
 import pytest
+from helpers import DATA, ROOT
 from liveserver import BROWSER_MARKS, LiveServer, chromium
 
-DATA = Path(__file__).parent / "data"
-ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
-DOC_IMG = Path(__file__).parents[1] / "docs" / "img" / "ui-sensing-1024x768.png"
+ARTIFACTS = ROOT / "test-artifacts"
+DOC_IMG = ROOT / "docs" / "img" / "ui-sensing-1024x768.png"
 #: The colours app.js draws the layers in (DETECTED_COLOUR, TRACKED_COLOUR).
 DETECTED_RGB = (208, 64, 255)
 TRACKED_RGB = (255, 210, 60)

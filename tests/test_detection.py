@@ -1,16 +1,14 @@
 """Obstacle detection in the loop (issue 6, Hing 2018 Sect. 3.5.1): with onboard sensing the
 planner and the avoidance layer use what the scans detected, not the scenario's obstacles."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from helpers import SCENARIOS
 
 from swarmpark.apps.run import run_world
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import build_world, load_scenario
 
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 CRATE = (6.5, 5.0, 7.5, 6.8)  # x0, y0, x1, y1 of the crate in room-detect.yaml
 PERSON_START = np.array([7.6, 3.4])  # where the person stands until 12 s
 
@@ -22,7 +20,7 @@ def _cells_in(grid, x0, y0, x1, y1):
 
 
 def test_with_sensing_the_planner_starts_without_the_scenarios_obstacles():
-    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    world = build_world(load_scenario(SCENARIOS / "room-detect.yaml"))
     assert world.static_obstacles  # the simulator has the crate ...
     sup = Supervisor(world)
     assert not _cells_in(sup.known_grid, *CRATE).any()  # ... the planner does not, yet
@@ -33,7 +31,7 @@ def test_with_sensing_the_planner_starts_without_the_scenarios_obstacles():
 
 @pytest.mark.slow
 def test_skids_park_past_a_detected_crate_and_a_person_who_walks_away():
-    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    world = build_world(load_scenario(SCENARIOS / "room-detect.yaml"))
     out = run_world(world)
     r, sup = out.result, out.supervisor
     assert r["expect_met"], r["expect_failures"]
@@ -55,7 +53,7 @@ def test_the_onboard_tracker_gives_navigation_the_walking_person_with_velocity()
     """Issue 20 item 3: with sensing on, the person is tracked from the scans (not read from
     the scenario) and navigation gets the track with its velocity; the crate and the person
     standing are detections only (tracks that never moved are not people)."""
-    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    world = build_world(load_scenario(SCENARIOS / "room-detect.yaml"))
     sup = Supervisor(world)
     errors = []
     while sup.t < 17.0:
@@ -78,7 +76,7 @@ def test_the_browser_frame_carries_the_onboard_trackers_people():
     from swarmpark.links.base import TrackedPeople
     from swarmpark.server.frames import FrameEncoder
 
-    world = build_world(load_scenario(ROOT / "room-detect.yaml"))
+    world = build_world(load_scenario(SCENARIOS / "room-detect.yaml"))
     sup = Supervisor(world)
     enc = FrameEncoder(sup)
     assert "tracked" not in enc.frame({})[0]

@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers import ROOT
 
 from swarmpark.core.gridmap import MapError, grid_from_walls, load_map_yaml
 from swarmpark.core.limits import MAX_GRID_CELLS
 
-MAPS = Path(__file__).resolve().parents[1] / "scenarios" / "maps"
+MAPS = ROOT / "scenarios" / "maps"
 
 
 def _png_header_only(width: int, height: int) -> bytes:

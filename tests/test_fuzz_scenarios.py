@@ -21,10 +21,10 @@ from pathlib import Path
 
 import pytest
 import yaml
+from helpers import ROOT
 
 from swarmpark.world.scenario import ScenarioError, build_world, load_scenario
 
-ROOT = Path(__file__).resolve().parents[1]
 #: The suite's scenarios (the experimental ones included); heavy sensing ones run fewer ticks.
 SOURCES = sorted((ROOT / "scenarios").glob("*.yaml"))
 SEED = 20261201

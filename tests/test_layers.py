@@ -5,10 +5,11 @@ import ast
 from pathlib import Path
 
 import pytest
+from helpers import ROOT
 
 from swarmpark._moved import MOVED
 
-SRC = Path(__file__).resolve().parents[1] / "src" / "swarmpark"
+SRC = ROOT / "src" / "swarmpark"
 ALIASES = {SRC / (old.removeprefix("swarmpark.").replace(".", "/") + ".py") for old in MOVED}
 #: What each layer may import from swarmpark (besides itself).
 ALLOWED = {

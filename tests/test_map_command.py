@@ -1,18 +1,16 @@
 """`swarmpark map`: a skid builds a map with its LIDAR while it drives; map_server output."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from helpers import SCENARIOS
 
 from swarmpark.apps.cli import main
 from swarmpark.apps.run import run_world
 from swarmpark.core.gridmap import load_map_yaml
 from swarmpark.world.scenario import build_world, load_scenario, parse_scenario
-
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
 
 def test_map_command_writes_a_map_that_agrees_with_the_hangar(tmp_path, capsys):

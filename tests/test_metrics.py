@@ -1,16 +1,12 @@
 """Metrics on tiny scripted runs whose numbers can be checked by hand."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from helpers import Scripted, make_world
+from helpers import SCENARIOS, Scripted, make_world
 
 from swarmpark.apps.cli import _print_table
 from swarmpark.apps.run import run_world
 from swarmpark.metrics import LOST_TIME, lower_bound_s
-
-SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
 
 def straight_run(**kw):

@@ -3,11 +3,9 @@ skids meeting head-on keep right, parked skids make room for a skid of higher pr
 only for one (issue 15, "one default stack"). The same scenarios with velocity obstacles are in
 tests/test_rvo_scenarios.py."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from helpers import make_world
+from helpers import SCENARIOS, make_world
 
 from swarmpark.apps.run import run_world
 from swarmpark.control.nav.follower import PathState
@@ -16,8 +14,6 @@ from swarmpark.control.nav.navigator import Navigator, NavParams, RobotNav
 from swarmpark.control.nav.params import KeepRightParams, MakeRoomParams
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import build_world, load_scenario, parse_scenario
-
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 
 
 def _view(a_pose, b_pose, **kw):
@@ -161,7 +157,7 @@ def test_a_walled_in_spot_is_reached_once_its_neighbours_make_room():
 
 @pytest.mark.slow
 def test_head_on_without_a_key_the_lower_priority_takes_the_larger_detour():
-    world = build_world(load_scenario(ROOT / "head-on-fig11.yaml"))
+    world = build_world(load_scenario(SCENARIOS / "head-on-fig11.yaml"))
     assert world.scenario.navigation.avoidance == "monitor"
     r = run_world(world).result
     assert r["success"] and r["collisions"] == [] and r["deadlocks"] == []
@@ -173,7 +169,7 @@ def test_head_on_without_a_key_the_lower_priority_takes_the_larger_detour():
 
 @pytest.mark.slow
 def test_pass_through_without_a_key_the_formation_opens_and_restores():
-    world = build_world(load_scenario(ROOT / "pass-through-fig6.yaml"))
+    world = build_world(load_scenario(SCENARIOS / "pass-through-fig6.yaml"))
     assert world.scenario.navigation.avoidance == "monitor"
     r = run_world(world).result
     assert r["success"] and r["collisions"] == [] and r["deadlocks"] == []

@@ -1,24 +1,21 @@
 """Order-free and perturbed starts (issue 22): the robot list's order changes nothing; start
 perturbations are seeded, valid and refused with the reason when impossible."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import yaml
+from helpers import SCENARIOS
 
 from swarmpark.apps.run import run_world
 from swarmpark.world.scenario import ScenarioError, build_world, parse_scenario
 
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
-
 
 def _data(name):
-    return yaml.safe_load((ROOT / name).read_text())
+    return yaml.safe_load((SCENARIOS / name).read_text())
 
 
 def _world(data):
-    return build_world(parse_scenario(data, ROOT))
+    return build_world(parse_scenario(data, SCENARIOS))
 
 
 def test_any_order_of_the_robot_list_builds_the_same_fleet():

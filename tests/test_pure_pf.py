@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers import SCENARIOS
 
 from swarmpark.apps.run import run_world
 from swarmpark.control.modes import NAVIGATION_MODES
@@ -18,9 +19,8 @@ from swarmpark.core.registry import UnknownNameError
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import ScenarioError, build_world, load_scenario, parse_scenario
 
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
-U_TRAP = ROOT / "u-trap-2015.yaml"
-U_TRAP_PF = ROOT / "experimental" / "u-trap-2015-pure-pf.yaml"
+U_TRAP = SCENARIOS / "u-trap-2015.yaml"
+U_TRAP_PF = SCENARIOS / "experimental" / "u-trap-2015-pure-pf.yaml"
 
 
 def _with_navigation(path: Path, **nav):

@@ -5,15 +5,14 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import DATA, ROOT
 
 from swarmpark.record import messages as m
 from swarmpark.record.reader import RecordingError, load_recording, read_channels, scans
 
-DATA = Path(__file__).parent / "data"
 SCENARIO = DATA / "rec-small.yaml"
 ROBOTS = ["s1", "s2", "s3"]
 
@@ -194,7 +193,7 @@ def test_messages_round_trip():
 def test_foxglove_layout_in_docs_is_the_generated_one():
     from swarmpark.record.foxglove_layout import fleet_layout
 
-    doc = json.loads((Path(__file__).parents[1] / "docs" / "foxglove-layout.json").read_text())
+    doc = json.loads((ROOT / "docs" / "foxglove-layout.json").read_text())
     assert doc == fleet_layout([f"s{k}" for k in range(1, 7)])
     assert doc["configById"]["3D!fleet"]["followTf"] == "map"
     assert "/s3/scan" in doc["configById"]["3D!fleet"]["topics"]

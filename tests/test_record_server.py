@@ -17,13 +17,14 @@ with warnings.catch_warnings():
     warnings.filterwarnings("ignore", message=".*httpx2.*")
     from fastapi.testclient import TestClient
 
+from helpers import DATA
+
 from swarmpark.record import messages as m
 from swarmpark.record.audit import AuditLog
 from swarmpark.record.live import LiveRecording
 from swarmpark.record.reader import load_recording
 from swarmpark.server import create_app
 
-DATA = Path(__file__).parent / "data"
 TOKEN = "audit-token"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 

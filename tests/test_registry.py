@@ -5,7 +5,6 @@ registry, and a method registered later is usable everywhere without other edits
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +12,8 @@ import pytest
 with warnings.catch_warnings():
     warnings.filterwarnings("ignore", message=".*httpx2.*")
     from fastapi.testclient import TestClient
+
+from helpers import DATA
 
 from swarmpark.assign import ASSIGNMENT_COSTS, cost_matrix
 from swarmpark.control.modes import AVOIDANCE_MODES
@@ -25,7 +26,6 @@ from swarmpark.server.engine import TELEOP_DEADMAN_S
 from swarmpark.server.schemas import MAX_SPEED_FACTOR, MIN_SPEED_FACTOR
 from swarmpark.world.scenario import ParkCmd, ScenarioError, parse_scenario
 
-DATA = Path(__file__).parent / "data"
 SQUARE = [[0, 0], [6, 0], [6, 4], [0, 4]]
 SKID = Footprint(1.2, 0.8)
 

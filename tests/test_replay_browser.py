@@ -7,15 +7,14 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import DATA, ROOT
 from liveserver import BROWSER_MARKS, LiveServer, chromium
 
-DATA = Path(__file__).parent / "data"
-ARTIFACTS = Path(__file__).parents[1] / "test-artifacts"
-DOC_IMG = Path(__file__).parents[1] / "docs" / "img" / "replay.png"
+ARTIFACTS = ROOT / "test-artifacts"
+DOC_IMG = ROOT / "docs" / "img" / "replay.png"
 
 pytestmark = BROWSER_MARKS
 

@@ -19,15 +19,17 @@ pytest.importorskip("rclpy")
 pytest.importorskip("cyclonedds")
 pytest.importorskip("rosbags")
 
+from helpers import DATA, ROOT  # noqa: E402
+
 from swarmpark.apps.run import run_world  # noqa: E402
 from swarmpark.links.ros2 import Ros2Link, Ros2Options  # noqa: E402
 from swarmpark.links.ros2_qos import loopback_env  # noqa: E402
 from swarmpark.world.scenario import build_world, load_scenario  # noqa: E402
 
+SCENARIO = DATA / "ros2-open.yaml"
+
 pytestmark = pytest.mark.ros2
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENARIO = ROOT / "tests" / "data" / "ros2-open.yaml"
 _DOMAINS = itertools.count()
 
 

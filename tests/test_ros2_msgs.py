@@ -8,6 +8,8 @@ import pytest
 
 pytest.importorskip("rosbags")
 
+from helpers import DATA  # noqa: E402
+
 from swarmpark.links import ros2_msgs as rm  # noqa: E402
 
 POSE = (1.25, -2.5, 0.7)
@@ -211,11 +213,9 @@ def test_unknown_type_is_refused_by_name():
 
 
 def _world():
-    from pathlib import Path
-
     from swarmpark.world.scenario import build_world, load_scenario
 
-    return build_world(load_scenario(Path(__file__).parent / "data" / "ros2-open.yaml"))
+    return build_world(load_scenario(DATA / "ros2-open.yaml"))
 
 
 def test_odometry_is_placed_in_the_map_from_the_start_pose():

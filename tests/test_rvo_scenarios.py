@@ -3,11 +3,10 @@
 files of head-on-fig11 and pass-through-fig6 run with the default stack (tests/test_nav_priority.py,
 tests/test_scenarios.py); here every scenario gets the key."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import yaml
+from helpers import SCENARIOS
 
 from swarmpark.apps.run import run_world
 from swarmpark.control.orca.kernel import orca_step
@@ -15,14 +14,12 @@ from swarmpark.core.geometry import Footprint
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import build_world, parse_scenario
 
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
-
 
 def rvo_world(name: str):
     """Scenario ``name`` with ``navigation: {avoidance: rvo}``."""
-    data = yaml.safe_load((ROOT / name).read_text())
+    data = yaml.safe_load((SCENARIOS / name).read_text())
     data["navigation"] = {**data.get("navigation", {}), "avoidance": "rvo"}
-    return build_world(parse_scenario(data, ROOT))
+    return build_world(parse_scenario(data, SCENARIOS))
 
 
 def test_robots_held_on_their_axis_move_only_along_it():
@@ -62,11 +59,11 @@ def test_fig11_lower_priority_takes_the_larger_detour():
 
 
 def test_estop_overrides_rvo_and_making_room():
-    data = yaml.safe_load((ROOT / "pass-through-fig6.yaml").read_text())
+    data = yaml.safe_load((SCENARIOS / "pass-through-fig6.yaml").read_text())
     data["navigation"] = {"avoidance": "rvo"}
     data["commands"].append({"at_s": 12.0, "estop": True})
     data["duration_s"] = 14.0
-    sup = Supervisor(build_world(parse_scenario(data, ROOT)))
+    sup = Supervisor(build_world(parse_scenario(data, SCENARIOS)))
     frozen = None
     while sup.t < 13.95:
         sup.tick()
@@ -113,10 +110,10 @@ def test_the_circle_also_parks_with_the_default_stack():
     """The 20-skid circle without its ``navigation`` key (the collision monitor with right of
     way, no velocity obstacles): every skid parks within tolerance, with no collision, given
     170 s (152.5 s measured; with RVO, the file's key, 88.9 s)."""
-    data = yaml.safe_load((ROOT / "circle-20-antipodal.yaml").read_text())
+    data = yaml.safe_load((SCENARIOS / "circle-20-antipodal.yaml").read_text())
     del data["navigation"]
     data["duration_s"] = 170.0
-    r = run_world(build_world(parse_scenario(data, ROOT))).result
+    r = run_world(build_world(parse_scenario(data, SCENARIOS))).result
     assert r["success"] and r["collisions"] == []
     for rid, s in r["robots"].items():
         assert s["final_position_error_m"] <= 0.10, rid

@@ -14,10 +14,10 @@ import urllib.error
 import urllib.request
 import warnings
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import DATA
 from liveserver import LiveServer
 from starlette.websockets import WebSocketDisconnect
 
@@ -36,7 +36,6 @@ with warnings.catch_warnings():
     warnings.filterwarnings("ignore", message=".*httpx2.*")
     from fastapi.testclient import TestClient
 
-DATA = Path(__file__).parent / "data"
 SMALL = DATA / "ui-small.yaml"
 ROBOTS = ["s1", "s2", "s3", "s4"]
 BOX = [[6.5, 2.0], [10.5, 2.0], [10.5, 6.0], [6.5, 6.0]]

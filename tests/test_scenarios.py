@@ -1,25 +1,23 @@
 """Scenario regression: every shipped scenario meets its ``expect`` block, with zero collisions
 and every commanded skid within 0.10 m and 5 deg of its goal."""
 
-from pathlib import Path
-
 import pytest
+from helpers import SCENARIOS
 
 from swarmpark.apps.run import run_world
 from swarmpark.world.scenario import build_world, load_scenario
 
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
 #: Run with more checks elsewhere: room-park-built by tests/test_map_command.py on a map built
 #: afresh (here it would use the committed one), room-detect by tests/test_detection.py,
 #: circle-20-antipodal by tests/test_rvo_scenarios.py.
 RUN_ELSEWHERE = {"room-park-built.yaml", "room-detect.yaml", "circle-20-antipodal.yaml"}
-SCENARIOS = sorted(p.name for p in ROOT.glob("*.yaml") if p.name not in RUN_ELSEWHERE)
+NAMES = sorted(p.name for p in SCENARIOS.glob("*.yaml") if p.name not in RUN_ELSEWHERE)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", SCENARIOS)
+@pytest.mark.parametrize("name", NAMES)
 def test_scenario_meets_expectations(name):
-    world = build_world(load_scenario(ROOT / name))
+    world = build_world(load_scenario(SCENARIOS / name))
     r = run_world(world).result
     assert r["expect_met"], r["expect_failures"]
     if r["time_to_park_s"] is not None and r.get("lower_bound_s"):
@@ -42,7 +40,7 @@ def test_scenario_meets_expectations(name):
 
 @pytest.mark.slow
 def test_formation_transit_holds_the_block():
-    world = build_world(load_scenario(ROOT / "formation-transit.yaml"))
+    world = build_world(load_scenario(SCENARIOS / "formation-transit.yaml"))
     r = run_world(world).result
     (fe,) = r["formation_error"]
     assert fe["method"] == "formation"
@@ -60,7 +58,7 @@ def test_formation_transit_from_perturbed_starts(seed):
 
     from swarmpark.world.scenario import parse_scenario
 
-    data = yaml.safe_load((ROOT / "formation-transit.yaml").read_text())
+    data = yaml.safe_load((SCENARIOS / "formation-transit.yaml").read_text())
     data["seed"], data["perturb"] = seed, {"start_m": 0.2, "start_deg": 10}
     world = build_world(parse_scenario(data))
     r = run_world(world).result
@@ -94,10 +92,10 @@ def test_perturbed_runs_that_once_failed_park(name, seed):
 
     from swarmpark.world.scenario import parse_scenario
 
-    data = yaml.safe_load((ROOT / f"{name}.yaml").read_text())
+    data = yaml.safe_load((SCENARIOS / f"{name}.yaml").read_text())
     data["seed"] = seed
     data["perturb"] = {"start_m": 0.2, "start_deg": 10, "shuffle": True}
-    r = run_world(build_world(parse_scenario(data, base_dir=ROOT))).result
+    r = run_world(build_world(parse_scenario(data, base_dir=SCENARIOS))).result
     assert r["success"], [k for k, v in r["robots"].items() if not v["parked"]]
     assert r["collisions"] == []
 
@@ -112,7 +110,7 @@ def test_person_blocking_a_formation_holds_it_once(leaves):
 
     from swarmpark.world.scenario import parse_scenario
 
-    data = yaml.safe_load((ROOT / "formation-person-blocks.yaml").read_text())
+    data = yaml.safe_load((SCENARIOS / "formation-person-blocks.yaml").read_text())
     if not leaves:  # the person stops on the path for good
         walker = data["obstacles"][0]
         walker["waypoints"], walker["waits_s"] = walker["waypoints"][:2], None

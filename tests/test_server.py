@@ -9,7 +9,6 @@ from __future__ import annotations
 import io
 import math
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,12 +19,13 @@ with warnings.catch_warnings():
     warnings.filterwarnings("ignore", message=".*httpx2.*")
     from fastapi.testclient import TestClient
 
+from helpers import DATA, ROOT
+
 from swarmpark.server import create_app
 from swarmpark.server.cli import serve_command
 from swarmpark.server.engine import MAX_TICKS_PER_FRAME, TELEOP_DEADMAN_S, Session
 from swarmpark.world.scenario import ScenarioError
 
-DATA = Path(__file__).parent / "data"
 SMALL = DATA / "ui-small.yaml"
 TOKEN = "s3cret-token"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -646,7 +646,7 @@ def test_create_app_rejects_a_bad_scenario(tmp_path):
 
 
 def test_default_scenario_is_the_hangar_in_the_scenarios_directory():
-    repo_scenarios = Path(__file__).parents[1] / "scenarios"
+    repo_scenarios = ROOT / "scenarios"
     app = create_app(None, scenarios_dir=repo_scenarios, autostart=False)
     assert app.state.session.path.name == "hangar-park.yaml"
 

@@ -1,23 +1,20 @@
 """People who stand and then walk (issues 22 and 15): the fleet never drives into a person and
 gives people the right of way, so the person does not walk into a skid either."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import yaml
+from helpers import SCENARIOS
 
 from swarmpark.apps.run import run_world
 from swarmpark.core.geometry import footprint_corners, rect_disc_gap
 from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import build_world, load_scenario, parse_scenario
 
-SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "person-stands-then-walks.yaml"
-
 
 @pytest.mark.slow
 def test_a_person_who_stands_then_walks_is_given_the_right_of_way():
-    world = build_world(load_scenario(SCENARIO))
+    world = build_world(load_scenario(SCENARIOS / "person-stands-then-walks.yaml"))
     r = run_world(world).result
     # Neither kind of contact: the skids give the person the right of way (issue 15).
     assert r["collisions"] == [], r["collisions"]
@@ -28,11 +25,10 @@ def test_a_person_who_stands_then_walks_is_given_the_right_of_way():
 
 # Issue 22 under start perturbations (sweeps/suite-perturbed.yaml: 0.2 m, 10 deg, shuffled).
 PERTURB = {"start_m": 0.2, "start_deg": 10, "shuffle": True}
-ROOT = SCENARIO.parent
 
 
 def _perturbed(name: str, seed: int, *, rvo: bool = False, **people):
-    data = yaml.safe_load((ROOT / name).read_text())
+    data = yaml.safe_load((SCENARIOS / name).read_text())
     data.update(seed=seed, perturb=PERTURB)
     if rvo:
         data["navigation"] = {"avoidance": "rvo"}
@@ -77,10 +73,10 @@ def test_a_walker_who_does_not_react_is_reported_as_walking_into_the_formation()
 @pytest.mark.slow
 @pytest.mark.parametrize("rvo", [False, True], ids=["default", "rvo"])
 def test_person_walks_through_the_formation_without_contact_and_it_restores(rvo):
-    data = yaml.safe_load((ROOT / "person-through-formation.yaml").read_text())
+    data = yaml.safe_load((SCENARIOS / "person-through-formation.yaml").read_text())
     if rvo:
         data["navigation"] = {"avoidance": "rvo"}
-    world = build_world(parse_scenario(data, ROOT))
+    world = build_world(parse_scenario(data, SCENARIOS))
     sup = Supervisor(world)
     corners = [fp.corners_body() for fp in sup.sim.footprints]
     start = sup.sim.poses.copy()

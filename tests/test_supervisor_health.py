@@ -2,10 +2,9 @@
 stopped, flagged, avoided and rejoins; a robot that does not follow its commands is flagged
 and stopped; commands never go to a robot never heard from."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from helpers import DATA
 
 from swarmpark.apps.run import run_world
 from swarmpark.links.base import VelocityCommand
@@ -14,7 +13,7 @@ from swarmpark.supervisor.core import Supervisor
 from swarmpark.supervisor.health import Health, HealthParams
 from swarmpark.world.scenario import build_world, load_scenario
 
-SCENARIO = Path(__file__).parent / "data" / "ros2-open.yaml"
+SCENARIO = DATA / "ros2-open.yaml"
 
 
 def _world(faults=()):

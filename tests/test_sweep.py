@@ -8,6 +8,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
+from helpers import ROOT
 
 from swarmpark.apps.cli import main
 from swarmpark.apps.sweep import SpecError, load_spec, run_sweep
@@ -77,7 +78,7 @@ def test_spec_expands_to_the_product_with_stable_ids(tmp_path, tiny):
     assert [j.job_id for j in load_spec(tmp_path / "spec.yaml").jobs] == [j.job_id for j in a.jobs]
 
 
-SWEEPS = Path(__file__).resolve().parents[1] / "sweeps"
+SWEEPS = ROOT / "sweeps"
 
 
 def test_the_committed_specs_load_and_the_200_site_measure_is_held_out():
