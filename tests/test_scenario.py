@@ -1,10 +1,9 @@
 """Scenario schema: every bad input named in the issue gives one clear message and exit code 2."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import yaml
+from helpers import ROOT
 
 from swarmpark.apps.cli import main
 from swarmpark.world.scenario import ScenarioError, build_world, load_scenario, parse_scenario
@@ -44,6 +43,39 @@ def test_unknown_key_is_named():
     msg = error_of(with_(robots=[{"id": "a", "pose": [2, 3, 0], "colour": "red"}]))
     assert msg.startswith("robots[0].colour: unknown key")
     assert "'red'" in msg
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"duration": 10}, "duration: unknown key (value 10); did you mean 'duration_s'?"),
+        (
+            {"robots": [{"id": "a", "pose": [2, 3, 0], "max_speed": 1}]},
+            "robots[0].max_speed: unknown key (value 1); did you mean 'max_speed_mps'?",
+        ),
+        (
+            {"navigation": {"avoidence": "rvo"}},
+            "navigation.avoidence: unknown key (value 'rvo'); did you mean 'avoidance'?",
+        ),
+        (
+            {"people": [{"waypoints": [[1, 1], [2, 2]]}]},
+            "people: unknown key (value [{'waypoints': [[1, 1], [2, 2]]}]); "
+            "people walk as `obstacles` entries with `waypoints`",
+        ),
+        # A person with a misspelt key is reported as a person, not as a polygon missing.
+        (
+            {"obstacles": [{"waypoints": [[1, 1], [2, 2]], "speed": 1}]},
+            "obstacles[0].speed: unknown key (value 1); did you mean 'speed_mps'?",
+        ),
+        (
+            {"obstacles": [{"waypoints": [[1, 1], [2, 2]], "speed_mps": -1}]},
+            "obstacles[0].speed_mps: Input should be greater than 0 (got -1)",
+        ),
+        ({"colour": "red"}, "colour: unknown key (value 'red')"),
+    ],
+)
+def test_unknown_key_says_what_was_meant(overrides, message):
+    assert error_of(with_(**overrides)) == message
 
 
 def test_wrong_type_names_field_and_value():
@@ -129,7 +161,7 @@ def test_cli_exit_2_for_missing_file(capsys):
 
 
 def test_shipped_scenarios_load():
-    root = Path(__file__).resolve().parents[1] / "scenarios"
+    root = ROOT / "scenarios"
     files = sorted(root.glob("*.yaml"))
     assert files, "no scenarios shipped"
     for f in files:

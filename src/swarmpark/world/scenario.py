@@ -7,6 +7,8 @@ user's edge) and converted to radians when the world is built. Every error is a
 
 from __future__ import annotations
 
+import difflib
+import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -422,22 +424,87 @@ def _loc(loc: tuple[Any, ...]) -> str:
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif part in ("StaticObstacleSpec", "PersonSpec") or "[" in str(part):
+        elif _is_branch(part):
             continue  # union branch names add nothing for the reader
         else:
             out += ("." if out else "") + str(part)
     return out or "scenario"
 
 
+#: Keys a new user may well write for something the schema has under another name.
+_KEY_HINTS = {
+    "people": "people walk as `obstacles` entries with `waypoints`",
+    "persons": "people walk as `obstacles` entries with `waypoints`",
+    "humans": "people walk as `obstacles` entries with `waypoints`",
+    "walls": "walls belong under `map`",
+    "footprint": "give it per robot or under `robot_defaults`",
+    "goals": "goals come from `commands` (`park`, `goto`)",
+}
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    """The pydantic models an annotation can hold (through lists, unions and Annotated)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [m for arg in typing.get_args(annotation) for m in _models_in(arg)]
+
+
+def _keys_at(loc: tuple[Any, ...]) -> list[str]:
+    """The keys the schema allows beside the unknown key at ``loc`` (empty if unresolved)."""
+    models: list[type[BaseModel]] = [Scenario]
+    for part in loc[:-1]:
+        if isinstance(part, int):
+            continue
+        if _is_branch(part):  # a union's branch: its name, or its validator's that ends in it
+            models = [m for m in models if str(part).rstrip("]").endswith(m.__name__)]
+            continue
+        models = [
+            sub
+            for m in models
+            if part in m.model_fields
+            for sub in _models_in(m.model_fields[part].annotation)
+        ]
+        if not models:
+            return []
+    return sorted({k for m in models for k in m.model_fields})
+
+
+def _unknown_key_hint(loc: tuple[Any, ...]) -> str:
+    """What the user may have meant by the unknown key at ``loc``."""
+    key = str(loc[-1]) if loc else ""
+    if key in _KEY_HINTS:
+        return f"; {_KEY_HINTS[key]}"
+    close = difflib.get_close_matches(key, _keys_at(loc), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _is_branch(part: Any) -> bool:
+    """Whether a location part names a union's branch (a static obstacle or a person)."""
+    return isinstance(part, str) and (part in ("StaticObstacleSpec", "PersonSpec") or "[" in part)
+
+
+def _closest_branch(errs: list[Any]) -> list[Any]:
+    """The errors of a union's branch with the fewest (the one the user meant), per union."""
+    by_union: dict[tuple[Any, ...], dict[Any, list[Any]]] = {}
+    plain = []
+    for e in errs:
+        cut = next((i for i, part in enumerate(e["loc"]) if _is_branch(part)), None)
+        if cut is None:
+            plain.append(e)
+        else:
+            by_union.setdefault(e["loc"][:cut], {}).setdefault(e["loc"][cut], []).append(e)
+    return plain + [e for b in by_union.values() for e in min(b.values(), key=len)]
+
+
 def _format_validation(exc: ValidationError) -> str:
-    errs = exc.errors()
-    # A union (static obstacle or person) reports every branch; show the closest one.
+    errs = _closest_branch(exc.errors())
+    # Of the rest, a missing or wrong value reads better than an unknown key beside it.
     err = min(errs, key=lambda e: (e["type"] == "extra_forbidden" and len(errs) > 1, len(e["loc"])))
     field = _loc(err["loc"])
     if err["type"] == "extra_forbidden":
         shown = repr(err["input"])
         shown = shown if len(shown) <= 120 else shown[:117] + "..."
-        return f"{field}: unknown key (value {shown})"
+        return f"{field}: unknown key (value {shown}){_unknown_key_hint(err['loc'])}"
     msg = err["msg"].removeprefix("Value error, ")
     value = err.get("input")
     shown = repr(value) if not isinstance(value, dict) else "{" + ", ".join(map(str, value)) + "}"
