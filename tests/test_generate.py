@@ -97,6 +97,22 @@ def test_door_is_wider_than_the_widest_skid_plus_two_margins(tmp_path):
         assert runs.max() * 0.01 >= wmax + 2 * park.margin_m - 2 * world.grid.resolution_m
 
 
+def test_unload_starts_parked_in_the_cabin_and_parks_in_the_hall(tmp_path):
+    for seed in range(4):
+        data = generate("unload", seed, robots=6)
+        world = build_world(load_scenario(write_scenario(data, tmp_path / f"u{seed}.yaml")))
+        park = world.scenario.commands[0].park
+        box = np.array(park.boundary)
+        starts = np.stack([r.start for r in world.robots])
+        # The box is in the hall, west of the door's wall; the skids stand east of it, in the
+        # cabin, as its park layout leaves them (a margin between neighbours).
+        assert box[:, 0].max() + 1.0 < starts[:, 0].min()
+        spacing = np.linalg.norm(starts[:, None, :2] - starts[None, :, :2], axis=2)
+        np.fill_diagonal(spacing, np.inf)
+        widest = max(max(r.footprint.length_m, r.footprint.width_m) for r in world.robots)
+        assert spacing.min(axis=1).max() <= widest + park.margin_m + 0.05
+
+
 @pytest.mark.parametrize(
     ("kind", "seed", "robots", "field"),
     [("warehouse", 1, None, "kind"), ("door", -1, None, "seed"), ("door", 1, 0, "robots")],

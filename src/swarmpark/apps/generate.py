@@ -1,4 +1,4 @@
-"""Seeded site generator: random but valid parking scenarios of eight kinds, for sweeps.
+"""Seeded site generator: random but valid parking scenarios of nine kinds, for sweeps.
 
 ``swarmpark generate KIND --seed S [--robots N] --out FILE.yaml`` writes one scenario in the
 polygon-walls map form. Everything random comes from one ``numpy`` Generator seeded from
@@ -18,6 +18,7 @@ l-bay         an L-shaped bay with pillars standing in it
 pass-through  a parked block of skids that a high-priority skid drives through (RVO)
 people        a hall where people walk through the parking area's aisles
 open-deck     a deck with few walls; the skids localize onboard (AMCL)
+unload        the fleet parked in an elevator's cabin drives out and parks in the hall
 
 >>> data = generate("door", 3, robots=4)
 >>> data["name"], len(data["robots"]), data["expect"]
@@ -50,7 +51,7 @@ MAX_ATTEMPTS = 8
 #: Then this many more draws, leaving out what may not fit (an L-bay's pillars).
 LAST_RESORT_ATTEMPTS = 4
 #: Kinds whose fleet may mix footprints (pass-through keeps the paper's uniform block).
-MIXED_KINDS = ("hangar", "elevator", "door", "corridor", "l-bay", "people", "open-deck")
+MIXED_KINDS = ("hangar", "elevator", "door", "corridor", "l-bay", "people", "open-deck", "unload")
 
 
 class GenerateError(ValueError):
@@ -330,6 +331,29 @@ def _open_deck(ctx: _Ctx) -> _Site:
     return site
 
 
+def _unload(ctx: _Ctx) -> _Site:
+    """The elevator the other way round: the fleet stands parked in the cabin (the park
+    layout of the cabin, each skid driven in nose first or backed in) and parks in the hall,
+    in the area the elevator kind starts from (its start grid's extent)."""
+    from swarmpark.core.geometry import Footprint
+    from swarmpark.layout import LayoutError, layout
+
+    site = _door_site(ctx, cabin=True)
+    fps = [Footprint(length, w, length / 2) for length, w in ctx.fps]
+    try:
+        parked = layout(site.boundary, fps, heading=math.radians(ctx.heading), margin_m=ctx.margin)
+    except LayoutError as exc:
+        raise FeasibilityError(f"robots: the fleet does not fit the cabin ({exc})") from None
+    flips = ctx.rng.integers(0, 2, size=ctx.n) * 180.0
+    starts = [
+        [_r(x), _r(y), _r(math.degrees(yaw) + flip)]
+        for (x, y, yaw), flip in zip(parked.poses.tolist(), flips.tolist(), strict=True)
+    ]
+    xy = np.array([p[:2] for p in site.starts])
+    lo, hi = xy.min(axis=0) - 0.5 * ctx.pitch, xy.max(axis=0) + 0.5 * ctx.pitch
+    return _Site(site.size, site.walls, starts, _rect(lo[0], lo[1], hi[0], hi[1]))
+
+
 KINDS: dict[str, Callable[[_Ctx], _Site]] = {
     "hangar": _hangar,
     "elevator": _elevator,
@@ -339,6 +363,7 @@ KINDS: dict[str, Callable[[_Ctx], _Site]] = {
     "pass-through": _pass_through,
     "people": _people,
     "open-deck": _open_deck,
+    "unload": _unload,  # last: a kind's index seeds its draws
 }
 
 
@@ -417,9 +442,9 @@ def generate(kind: str, seed: int, *, robots: int | None = None) -> dict:
         heading = float(rng.choice([0.0, 90.0]))
         ctx = _Ctx(rng, n, fps, margin, heading, slack=1.0 + 0.2 * attempt)
         ctx.last_resort = attempt >= MAX_ATTEMPTS
-        site = KINDS[kind](ctx)
-        data = _scenario(kind, seed, ctx, site)
         try:
+            site = KINDS[kind](ctx)
+            data = _scenario(kind, seed, ctx, site)
             report = check_feasible(data, walkers=site.extra.get("_walkers", 0), rng=rng)
         except FeasibilityError as exc:
             last = exc
