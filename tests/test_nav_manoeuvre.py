@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from navkit import advance, make_view
 
+from swarmpark.control.nav.follower import PathState
 from swarmpark.control.nav.manoeuvre import ManoeuvrePlanner, ManoeuvreState
 from swarmpark.control.nav.params import ManoeuvreParams
 
@@ -226,3 +227,44 @@ def test_on_a_coarse_map_a_manoeuvre_keeps_the_monitors_margin():
             )
             me = Polygon(footprint_corners(pose[None], body)[0])
             assert min(me.distance(o) for o in others) >= 0.03 - 1e-3, (kind, pose)
+
+
+#: A dead-end slot 1.1 m wide at the hall's east side, the 0.8 m skid in it nose to its end
+#: wall (no room to turn on the spot), and its goal 7 m west: as a skid parked on an elevator
+#: and sent to a bay beyond the door.
+SLOT = [(7.6, 2.4, 9.0, 2.45), (7.6, 3.55, 9.0, 3.6), (9.0, 2.4, 9.3, 3.6)]
+SLOT_START = np.array([8.35, 3.0, 0.0])
+FAR_GOAL = np.array([1.0, 3.0, np.pi])
+
+
+def _far(paths, steps=300):
+    """Drive the slotted skid with a window too small for its goal (``paths``: its plan)."""
+    p = ManoeuvreParams(stuck_s=0.5, window_margin_m=1.5, max_window_m=8.0)
+    planner = ManoeuvrePlanner(p)
+    states = [ManoeuvreState()]
+    view = make_view([SLOT_START], [FAR_GOAL], boxes=SLOT)
+    assert planner._window(view, 0) is None  # the goal is beyond one window
+    idx = np.array([0])
+    for _ in range(steps):
+        raw = np.zeros((1, 2))
+        planner.step(view, idx, raw, states, np.array([True]), paths=paths)
+        if states[0].failed or (states[0].planned and not states[0].running()):
+            break
+        view = advance(view, raw)
+    return p, view, states[0]
+
+
+def test_a_skid_stuck_far_from_its_goal_manoeuvres_onto_its_path():
+    path = PathState(path=np.array([SLOT_START[:2], FAR_GOAL[:2]]), path_goal=FAR_GOAL.copy())
+    p, view, st = _far([path])
+    assert st.planned >= 1 and st.failed == 0 and not st.running()  # planned, driven, done
+    # It ends on its path, via_m[0] along it, facing along it (the way to its goal).
+    end = view.poses[0]
+    assert abs(end[0] - (SLOT_START[0] - p.via_m[0])) < 0.06 and abs(end[1] - 3.0) < 0.06
+    assert abs(np.angle(np.exp(1j * (end[2] - np.pi)))) < np.deg2rad(3.0)
+    # Without a path (or one planned for another goal) there is nothing to aim at.
+    _, _, st = _far(None)
+    assert st.failed == 1 and not st.running()
+    stale = PathState(path=path.path, path_goal=np.array([1.0, 2.0, np.pi]))
+    _, _, st = _far([stale])
+    assert st.failed == 1

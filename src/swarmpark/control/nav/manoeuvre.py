@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmpark.control.base import ControlView
+from swarmpark.control.nav.follower import PathState, station
 from swarmpark.control.nav.params import ManoeuvreParams
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import refine_occupancy
@@ -83,12 +84,14 @@ class ManoeuvrePlanner:
         states: list[ManoeuvreState],
         eligible: np.ndarray,
         settled: np.ndarray | None = None,
+        paths: list[PathState] | None = None,
     ) -> np.ndarray:
         """Replace the commands ``raw`` (rows of ``idx``) of the skids in a manoeuvre; start
         one for an ``eligible`` skid that made no progress for ``stuck_s`` (``near_stuck_s``
         within ``near_goal_m`` of its goal). Returns which rows are manoeuvring. ``settled``
         ``(N,)``: the skids that could make room; a skid for which no manoeuvre is found but
-        one is without them is marked walled in."""
+        one is without them is marked walled in. ``paths`` (per skid): the planned paths, for
+        a skid whose goal is too far for one window (:meth:`_via`)."""
         p = self.params
         out = np.zeros(len(idx), dtype=bool)
         pose, goal = view.poses[idx], view.goals[idx]
@@ -119,7 +122,7 @@ class ManoeuvrePlanner:
             if not st.running():
                 if view.t - st.best_t < wait_s[k] or view.t < st.retry_t:
                     continue
-                self._start(view, i, st, settled)
+                self._start(view, i, st, settled, None if paths is None else paths[i])
                 if not st.running():
                     continue
             cmd = self._drive(view, i, st)
@@ -161,14 +164,21 @@ class ManoeuvrePlanner:
 
     # ------------------------------------------------------------------ planning
 
-    def _window(self, view: ControlView, i: int, leave_out: np.ndarray | None = None):
-        """The occupancy of the window around skid ``i`` and its goal: the map, the other
-        skids where they stand (grown by ``skid_margin_m``; not those in ``leave_out``) and the
-        people."""
+    def _window(
+        self,
+        view: ControlView,
+        i: int,
+        leave_out: np.ndarray | None = None,
+        goal: np.ndarray | None = None,
+    ):
+        """The occupancy of the window around skid ``i`` and its goal (or ``goal``): the map,
+        the other skids where they stand (grown by ``skid_margin_m``; not those in
+        ``leave_out``) and the people."""
         p = self.params
         grid = view.grid
         res = grid.resolution_m
-        pts = np.vstack([view.poses[i, :2], view.goals[i, :2]])
+        goal = view.goals[i] if goal is None else goal
+        pts = np.vstack([view.poses[i, :2], goal[:2]])
         lo = pts.min(axis=0) - p.window_margin_m
         hi = pts.max(axis=0) + p.window_margin_m
         if np.any(hi - lo > p.max_window_m):
@@ -205,18 +215,25 @@ class ManoeuvrePlanner:
         return occ, origin, res
 
     def _start(
-        self, view: ControlView, i: int, st: ManoeuvreState, settled: np.ndarray | None = None
+        self,
+        view: ControlView,
+        i: int,
+        st: ManoeuvreState,
+        settled: np.ndarray | None = None,
+        path: PathState | None = None,
     ) -> None:
         p = self.params
         win = self._window(view, i)
         st.planned += 1
         segments = None
-        if win is not None:
-            # A manoeuvre planned at the bare margin can leave the skid, stopped a few cm off
-            # a planned turn point, inside the monitor's margin, which then holds it there
-            # (found on a perturbed suite run: a turn in a doorway, planned again and held
-            # again for 150 s). After such a hold the next one is planned roomy first.
-            grows = (p.roomy_grow_m, p.grow_m) if st.roomy else (p.grow_m,)
+        # A manoeuvre planned at the bare margin can leave the skid, stopped a few cm off a
+        # planned turn point, inside the monitor's margin, which then holds it there (found on
+        # a perturbed suite run: a turn in a doorway, planned again and held again for 150 s).
+        # After such a hold the next one is planned roomy first.
+        grows = (*p.roomy_grow_m, p.grow_m) if st.roomy else (p.grow_m,)
+        if win is None and path is not None:
+            segments = self._via(view, i, path, grows)
+        elif win is not None:
             for grow in grows:
                 segments = self._plan(view, i, *win, grow)
                 if segments:
@@ -245,7 +262,15 @@ class ManoeuvrePlanner:
         st.goal = view.goals[i].copy()
 
     def _plan(
-        self, view: ControlView, i: int, occ, origin, res, grow_m: float, goal_tol_m: float = 0.0
+        self,
+        view: ControlView,
+        i: int,
+        occ,
+        origin,
+        res,
+        grow_m: float,
+        goal_tol_m: float = 0.0,
+        goal: np.ndarray | None = None,
     ) -> list | None:
         """The segments of a manoeuvre from where skid ``i`` stands (ending within
         ``goal_tol_m`` of the goal's cell, :func:`~swarmpark.plan.lattice.plan_manoeuvre`); a
@@ -263,7 +288,8 @@ class ManoeuvrePlanner:
             "budget": p.budget,
             "goal_tol_m": goal_tol_m,
         }
-        pose, goal = view.poses[i], view.goals[i]
+        pose = view.poses[i]
+        goal = view.goals[i] if goal is None else goal
         plan = plan_manoeuvre(occ, origin, res, fp, pose, goal, **kw)
         if plan is not None and plan.start_free:
             return plan.segments() if len(plan.poses) >= 2 else None
@@ -289,6 +315,41 @@ class ManoeuvrePlanner:
                 if rest is not None and len(rest.poses) >= 2:
                     return [(kind, pose.copy(), out), *rest.segments()]
         return plan.segments() if plan is not None and len(plan.poses) >= 2 else None
+
+    def _via(self, view: ControlView, i: int, path: PathState, grows) -> list | None:
+        """A manoeuvre to a pose on skid ``i``'s path ahead, for a skid stuck farther from its
+        goal than one window reaches: ``via_m`` along the path from where it stands (the
+        nearest first that is clear), at the path's heading there; the path follower takes
+        over where it ends. Without it such a skid never had a manoeuvre: a skid parked on an
+        elevator, sent to a bay 10 m beyond the door, nose to the elevator's side wall with no
+        room to turn on the spot, shuffled to and fro for the rest of the run."""
+        p = self.params
+        if path.path is None or len(path.path) < 2 or not path.is_for(view.goals[i]):
+            return None
+        geom = path.geometry()
+        cum, _, here = station(path.path, view.poses[i, :2], geom)
+        fp = view.footprints[i]
+        tries = []  # (via pose, its window) per distance along the path
+        for d in p.via_m:
+            s = here + d
+            if s + p.via_tangent_m > cum[-1]:
+                continue  # the goal is near along the path: not this manoeuvre's case
+            x0, y0, x, y, x1, y1 = (
+                np.interp(s + e, cum, path.path[:, k])
+                for e in (-p.via_tangent_m, 0.0, p.via_tangent_m)
+                for k in (0, 1)
+            )
+            via = np.array([x, y, np.arctan2(y1 - y0, x1 - x0)])
+            win = self._window(view, i, goal=via)
+            if win is not None:
+                tries.append((via, win))
+        for grow in grows:  # the roomiest first, at every distance
+            for via, win in tries:
+                if footprint_clear(*win, fp, via, grow):
+                    segments = self._plan(view, i, *win, grow, goal=via)
+                    if segments:
+                        return segments
+        return None
 
     # ------------------------------------------------------------------ driving
 

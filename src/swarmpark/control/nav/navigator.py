@@ -215,7 +215,7 @@ class Navigator:
         eligible = ~docked & ~waiting & ~fleet.waiting[idx] & use
         # Walled in is judged against the settled skids, which could make room.
         settled = self._settled(view)[0] if p.make_room.for_walled else None
-        man = self.manoeuvre.step(view, idx, raw, man_states, eligible, settled)
+        man = self.manoeuvre.step(view, idx, raw, man_states, eligible, settled, paths)
         for i in idx[man]:
             self.robots[i].dock.runup = False  # the docking starts afresh after it
         mraw = raw[man].copy()
