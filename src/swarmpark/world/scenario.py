@@ -432,10 +432,11 @@ def _loc(loc: tuple[Any, ...]) -> str:
 
 
 #: Keys a new user may well write for something the schema has under another name.
+_PEOPLE_HINT = "people walk as `obstacles` entries with `waypoints`"
 _KEY_HINTS = {
-    "people": "people walk as `obstacles` entries with `waypoints`",
-    "persons": "people walk as `obstacles` entries with `waypoints`",
-    "humans": "people walk as `obstacles` entries with `waypoints`",
+    "people": _PEOPLE_HINT,
+    "persons": _PEOPLE_HINT,
+    "humans": _PEOPLE_HINT,
     "walls": "walls belong under `map`",
     "footprint": "give it per robot or under `robot_defaults`",
     "goals": "goals come from `commands` (`park`, `goto`)",

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmpark.control.base import ControlView
-from swarmpark.control.nav.follower import PathState, station
+from swarmpark.control.nav.follower import PathState, point_at, station
 from swarmpark.control.nav.params import ManoeuvreParams
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import refine_occupancy
@@ -329,23 +329,22 @@ class ManoeuvrePlanner:
         geom = path.geometry()
         cum, _, here = station(path.path, view.poses[i, :2], geom)
         fp = view.footprints[i]
-        tries = []  # (via pose, its window) per distance along the path
+        vias = []
         for d in p.via_m:
             s = here + d
             if s + p.via_tangent_m > cum[-1]:
                 continue  # the goal is near along the path: not this manoeuvre's case
-            x0, y0, x, y, x1, y1 = (
-                np.interp(s + e, cum, path.path[:, k])
-                for e in (-p.via_tangent_m, 0.0, p.via_tangent_m)
-                for k in (0, 1)
+            (back, _), (xy, _), (ahead, _) = (
+                point_at(path.path, cum, s + e) for e in (-p.via_tangent_m, 0.0, p.via_tangent_m)
             )
-            via = np.array([x, y, np.arctan2(y1 - y0, x1 - x0)])
-            win = self._window(view, i, goal=via)
-            if win is not None:
-                tries.append((via, win))
+            vias.append(np.array([*xy, np.arctan2(*(ahead - back)[::-1])]))
+        windows: dict[int, tuple | None] = {}  # each via's window, built when first needed
         for grow in grows:  # the roomiest first, at every distance
-            for via, win in tries:
-                if footprint_clear(*win, fp, via, grow):
+            for k, via in enumerate(vias):
+                if k not in windows:
+                    windows[k] = self._window(view, i, goal=via)
+                win = windows[k]
+                if win is not None and footprint_clear(*win, fp, via, grow):
                     segments = self._plan(view, i, *win, grow, goal=via)
                     if segments:
                         return segments
