@@ -126,6 +126,43 @@ def test_estop_reaches_the_link_as_a_stop():
     assert link.stops == 1
 
 
+@pytest.mark.parametrize("lands", ["before the step", "during the step", "after the step"])
+def test_an_estop_that_lands_during_a_tick_counts_from_that_ticks_end(lands):
+    """The server applies the e-stop from its event loop, so it can land while the sim
+    thread is inside a tick whose commands were already decided. It is stamped with that
+    tick's end, and from the next tick on nothing moves."""
+    world = make_world(robots=THREE[:1])
+    sup = Supervisor(world)
+    sup.park(ParkCmd(robots=["a"], boundary=[[7, 0.5], [11, 0.5], [11, 6.5], [7, 6.5]]))
+    while sup.sim.vel[0, 0] < 0.2:
+        sup.tick()
+    spin, step, outs = sup.link.spin, sup.sim.step, []
+
+    def spin_with_estop():
+        if lands == "before the step":
+            outs.append(sup.estop())
+        result = spin()
+        if lands == "after the step":
+            outs.append(sup.estop())
+        return result
+
+    def step_with_estop(*args, **kwargs):
+        outs.append(sup.estop())
+        return step(*args, **kwargs)
+
+    sup.link.spin = spin_with_estop
+    if lands == "during the step":
+        sup.sim.step = step_with_estop
+    sup.tick()
+    sup.link.spin, sup.sim.step = spin, step
+    assert outs[0].accepted and outs[0].t_s == pytest.approx(sup.t)
+    pose = sup.sim.poses.copy()
+    for _ in range(5):
+        sup.tick()
+        assert np.all(sup.sim.vel == 0.0)
+        assert np.array_equal(sup.sim.poses, pose)
+
+
 # ----------------------------------------------------------------------------- fill order
 
 

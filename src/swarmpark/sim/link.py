@@ -195,8 +195,10 @@ class SimLink:
         sim = self.sim
         fresh = sim.t - self._cmd_t <= CMD_TIMEOUT_S + 1e-9
         cmd = np.where(fresh[:, None], self._cmd, 0.0)
-        step = sim.step(cmd, hold=self._hold.copy())
-        self._hold[:] = False
+        held = self._hold.copy()
+        step = sim.step(cmd, hold=held)
+        self._hold &= ~held  # a stop that came during the step holds the next one
+
         self._publish(scan=self.sensing, step=step)
         return step
 

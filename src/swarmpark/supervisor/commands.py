@@ -118,7 +118,12 @@ class CommandsMixin:
         return out
 
     def _accept(self, command: str, **detail) -> Outcome:
-        out = Outcome(True, command, "", self.t, detail)
+        # Between two ticks a command counts from now. The e-stop and stops also come from
+        # another thread during a tick (the server's event loop): that tick decided, or
+        # stepped, without them, so they count from its end.
+        start = self._tick_start
+        t = self.t if start is None else max(self.t, start + self.info.dt_s)
+        out = Outcome(True, command, "", t, detail)
         self.outcomes.append(out)
         return out
 

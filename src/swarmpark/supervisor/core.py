@@ -123,6 +123,7 @@ class Supervisor(CommandsMixin):
         self.priority = np.array([r.priority for r in world.robots], float)
         self.stopped = np.zeros(n, dtype=bool)
         self.estopped = False
+        self._tick_start: float | None = None  # t at the start of the tick under way
         self.teleop = np.zeros(n, dtype=bool)
         self._teleop_cmd = np.zeros((n, 2))
         self._teleop_t = np.full(n, -np.inf)
@@ -407,6 +408,12 @@ class Supervisor(CommandsMixin):
 
     def tick(self):
         """One decision phase for every robot from one snapshot, then one move phase."""
+        try:
+            return self._tick()
+        finally:
+            self._tick_start = None
+
+    def _tick(self):
         self._run_due_commands()
         if self._kidnaps:
             self._run_due_kidnaps()
@@ -414,6 +421,9 @@ class Supervisor(CommandsMixin):
         self._reassign()
         self._hand_over()
         view = self.view()
+        # From here on a command accepted from another thread (the e-stop) may come too late
+        # for this tick's decisions or step: it is stamped with the tick's end.
+        self._tick_start = self.t
         cmd = self._commands(view)
         self.goal_changed[:] = False
         t = self.t
