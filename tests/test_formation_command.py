@@ -60,7 +60,7 @@ def test_skids_off_their_start_are_joined_to_the_path():
         {"id": "a", "pose": [3.15, 3.0, 10.0]},
         {"id": "b", "pose": [1.5, 3.2, -5.0]},
     ]
-    sup = Supervisor(make_world(robots=robots, commands=[]))
+    sup = Supervisor(make_world(robots=robots, commands=[], map={"size_m": [14, 6]}))
     out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[3, 3], [8, 3], [12, 4]]]))
     assert out.accepted, out.reason
     (run,) = sup.formations
@@ -86,3 +86,44 @@ def test_a_skid_facing_away_from_its_path_is_refused_saying_so():
     assert not out.accepted
     assert "robot 0 faces 180 deg away from where its path goes" in out.reason
     assert sup.formations == []
+
+
+def test_a_path_through_a_wall_is_refused_naming_the_robot_and_the_place():
+    """The plan times the robots along fixed paths and knows no map: a follower's path, the
+    leader's carried 1.5 m to its left, would run into a block beside the leader's lane."""
+    block = [[6, 3.7], [7, 3.7], [7, 6], [6, 6]]
+    robots = [{"id": "a", "pose": [3.0, 2.0, 0.0]}, {"id": "b", "pose": [3.0, 3.5, 0.0]}]
+    sup = Supervisor(make_world(robots=robots, map={"size_m": [10, 6], "walls": [block]}))
+    before = (sup.goals.copy(), sup.has_goal.copy())
+    out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[3, 2], [9, 2]]]))
+    assert not out.accepted
+    assert out.reason.startswith(
+        "formation.paths: robot 'b' would hit a wall or obstacle 2.5 m along its path, at (5.45, 3.50) m"
+    ), out.reason
+    assert "the leader's carried at its offset" in out.reason
+    assert np.array_equal(sup.goals, before[0]) and np.array_equal(sup.has_goal, before[1])
+    assert sup.formations == []
+    # Off the map is named as such; a path that stops short of the block is accepted.
+    out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[3, 2], [3, 0.5]]]))
+    assert not out.accepted
+    assert out.reason.startswith("formation.paths: robot 'a' would leave the map"), out.reason
+    out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[3, 2], [4.5, 2]]]))
+    assert out.accepted, out.reason
+
+
+def test_a_formation_stops_short_of_a_skid_standing_on_its_path():
+    """The map check sees walls, not skids: a skid standing on the group's path is left to
+    the collision monitor, which holds the formation before it touches."""
+    robots = [
+        {"id": "a", "pose": [2.5, 3.0, 0.0]},
+        {"id": "b", "pose": [1.0, 3.0, 0.0]},
+        {"id": "x", "pose": [6.0, 3.0, 90.0]},  # no orders: it stays where it stands
+    ]
+    sup = Supervisor(make_world(robots=robots))
+    out = sup.formation(FormationCmd(robots=["a", "b"], paths=[[[2.5, 3], [9, 3]]]))
+    assert out.accepted, out.reason
+    for _ in range(int(25 / sup.info.dt_s)):
+        sup.tick()
+    assert sup.metrics.collisions == []
+    gap = sup.sim.poses[2, 0] - 0.4 - (sup.sim.poses[0, 0] + 0.6)  # x's side to a's nose
+    assert 0.0 < gap < 1.0, gap

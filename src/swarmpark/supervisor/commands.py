@@ -425,7 +425,11 @@ class CommandsMixin:
     def formation(self, cmd) -> Outcome:
         """Move a group along paths holding a formation (Liu, Sun, Zhu 2010); the group is
         handed back to the navigation stack for the final docking when the plan ends."""
-        from swarmpark.control.formation.run import FormationError, FormationRun
+        from swarmpark.control.formation.run import (
+            FormationError,
+            FormationRun,
+            first_map_conflict,
+        )
 
         idx = self._robot_indices(cmd.robots, "formation.robots")
         if isinstance(idx, str):
@@ -445,6 +449,23 @@ class CommandsMixin:
             )
         except (ValueError, FormationError) as exc:
             return self._refuse("formation", str(exc))
+        conflict = first_map_conflict(
+            run.problem.paths, [self.info.footprints[i] for i in idx], self.known_grid
+        )
+        if conflict is not None:
+            k, s, pose, off = conflict
+            how = (
+                "its path is the leader's carried at its offset: draw the leader's path "
+                "farther from it, or give one path per robot"
+                if k > 0 and len(cmd.paths) == 1
+                else "draw the path clear of it"
+            )
+            return self._refuse(
+                "formation",
+                f"formation.paths: robot {self.ids[idx[k]]!r} would "
+                f"{'leave the map' if off else 'hit a wall or obstacle'} {s:.1f} m along its "
+                f"path, at ({pose[0]:.2f}, {pose[1]:.2f}) m ({how})",
+            )
         self._leave_groups(idx)
         self.formations.append(run)
         self._set_goals(idx, run.goals)

@@ -397,10 +397,12 @@ class Supervisor(CommandsMixin):
                 cmd[f.idx] = np.where(go[:, None], fc, 0.0)
         fresh = self.teleop & (self.t - self._teleop_t <= TELEOP_TIMEOUT_S)
         cmd[fresh] = self._teleop_cmd[fresh]
-        # Teleop goes through the collision monitor too: the operator's command is slowed,
-        # and stopped, before the skid would touch a wall, an obstacle, a person or a skid.
+        # Teleop and the formation plans go through the collision monitor too: the command is
+        # slowed, and stopped, before the skid would touch a wall, an obstacle, a person or a
+        # skid (a formation's paths are checked against the map once, but it is tracked
+        # with errors, and the people it yields to may still step into it).
         guard = getattr(self.controller, "guard", None)
-        rows = np.flatnonzero(fresh)
+        rows = np.flatnonzero(fresh | (self._formation_mask() & ~view.active))
         if guard is not None and len(rows) and np.any(cmd[rows] != 0.0):
             cmd[rows] = guard(view, rows, cmd[rows])
         cmd[self.health.faulted] = 0.0

@@ -23,10 +23,16 @@ from swarmpark.control.formation import (
     sample_reference,
     track_unicycle,
 )
-from swarmpark.core.geometry import Footprint, rotation, wrap_angle
+from swarmpark.core.geometry import (
+    Footprint,
+    body_corners,
+    footprint_corners,
+    rotation,
+    wrap_angle,
+)
 from swarmpark.core.paths import SplinePath
 
-__all__ = ["FormationRun", "FormationError"]
+__all__ = ["FormationRun", "FormationError", "first_map_conflict"]
 
 #: People farther than this from every robot of the group are not watched.
 WATCH_RANGE_M = 5.0
@@ -124,6 +130,39 @@ def _follower_waypoints(leader_wps: np.ndarray, poses: np.ndarray, offsets: np.n
         c, sn = np.cos(lp[:, 2]), np.sin(lp[:, 2])
         out.append(np.column_stack([lp[:, 0] + c * dx - sn * dy, lp[:, 1] + sn * dx + c * dy]))
     return out
+
+
+#: Spacing of the poses at which a formation's paths are checked against the map (m).
+MAP_CHECK_STEP_M = 0.05
+
+
+def first_map_conflict(
+    paths, footprints: list[Footprint], grid
+) -> tuple[int, float, np.ndarray, bool] | None:
+    """The first robot whose footprint, carried along its path at the path's heading, would
+    overlap an occupied cell of ``grid`` or reach off it: ``(robot, arc length (m), pose,
+    off the map)``, or ``None``.
+
+    The formation plan (Sect. II) times the robots along fixed paths and knows nothing of
+    the map, so a path through a wall (a follower's path carried at its offset round a
+    corner, typically) would be driven into it. A robot whose start already touches
+    something is checked from where its path comes clear.
+    """
+    for k, (path, fp) in enumerate(zip(paths, footprints, strict=True)):
+        n = max(int(math.ceil(path.length_m / MAP_CHECK_STEP_M)), 1) + 1
+        s = np.linspace(0.0, path.length_m, n)
+        poses = path.pose(s)
+        corners = footprint_corners(poses, body_corners([fp] * n))
+        hits = grid.footprint_hits(corners)
+        if hits[0]:
+            clear = np.flatnonzero(~hits)
+            hits[: clear[0] if len(clear) else n] = False
+        if hits.any():
+            j = int(np.argmax(hits))
+            (x0, y0, x1, y1), c = grid.bounds, corners[j]
+            off = bool(np.any((c < [x0, y0]) | (c > [x1, y1])))
+            return k, float(s[j]), poses[j], off
+    return None
 
 
 def _safe_distance(cmd, footprints: list[Footprint], poses: np.ndarray) -> float:
