@@ -76,3 +76,28 @@ def test_a_goto_into_a_block_is_refused_and_the_orders_kept(tmp_path):
         "[5.0, 4.0, 90.0]"
     )
     np.testing.assert_allclose(sup.goals[0], [1.5, 7.0, 0.0])
+
+
+def test_a_goto_to_a_closed_pocket_is_refused_and_the_orders_kept():
+    """A 3 x 3 m room walled off on every side: its floor is free, but no skid gets in. The
+    goto is refused at once (before, it was accepted, and the skid drove to the wall and
+    stood there with "no path to its goal")."""
+    walls = [[[6, 1], [10, 1], [10, 1.3], [6, 1.3]], [[6, 4.7], [10, 4.7], [10, 5], [6, 5]]]
+    walls += [[[6, 1.3], [6.3, 1.3], [6.3, 4.7], [6, 4.7]], [[9.7, 1.3], [10, 1.3], [10, 4.7]]]
+    walls[-1].append([9.7, 4.7])
+    data = {"name": "pocket", "map": {"size_m": [12, 6], "walls": walls}}
+    data["robots"] = [{"id": "a", "pose": [2.0, 3.0, 0.0]}]
+    sup = Supervisor(build_world(parse_scenario(data)))
+    assert sup.command("goto", {"robot": "a", "pose": [2.0, 5.0, 0]}).accepted
+    out = sup.command("goto", {"robot": "a", "pose": [8.0, 3.0, 0]})
+    assert not out.accepted
+    assert out.reason == (
+        "goto.pose: robot 'a' has no way to [8.0, 3.0, 0.0] on the known map (every way there "
+        "is narrower than its width, 0.80 m)"
+    )
+    np.testing.assert_allclose(sup.goals[0], [2.0, 5.0, 0.0])
+    # A 1 m gap in its west wall opens the room: the goto is taken.
+    data["map"]["walls"][2] = [[6, 1.3], [6.3, 1.3], [6.3, 2.5], [6, 2.5]]
+    data["map"]["walls"].append([[6, 3.5], [6.3, 3.5], [6.3, 4.7], [6, 4.7]])
+    sup = Supervisor(build_world(parse_scenario(data)))
+    assert sup.command("goto", {"robot": "a", "pose": [8.0, 3.0, 0]}).accepted

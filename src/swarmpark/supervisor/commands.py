@@ -370,7 +370,7 @@ class CommandsMixin:
         if self.teleop[i]:
             return self._refuse("goto", f"goto.robot: robot {cmd.robot!r} is under teleop")
         goal = np.array([cmd.pose[0], cmd.pose[1], np.deg2rad(cmd.pose[2])])
-        reason = self._goal_reachability(i, goal)
+        reason = self._goal_reachability(i, goal) or self._goal_connected(i, goal)
         if reason:
             return self._refuse("goto", reason)
         self._leave_groups(np.array([i]))
@@ -405,6 +405,26 @@ class CommandsMixin:
                 f"outside it at {where}"
             )
         return ""
+
+    def _goal_connected(self, i: int, goal: np.ndarray) -> str:
+        """Reason the skid cannot get to ``goal`` at all on the known map (every way there
+        narrower than the skid is wide: a closed room, a pocket behind obstacles), or ''.
+        Judged on the map's own grid, more leniently than the navigation plans (on a
+        coarser grid), so that a goal refused here is out of reach for certain."""
+        from swarmpark.plan.grid import build_costmap, plan_path
+
+        grid, half = self.known_grid, self.info.footprints[i].width_m / 2
+        cached = self._goto_costmap
+        if cached is None or cached[0] is not grid or cached[1] != half:
+            cached = self._goto_costmap = (grid, half, build_costmap(grid, half, half))
+        if plan_path(cached[2], self.poses_known[i, :2], goal[:2]) is not None:
+            return ""
+        where = [round(float(goal[0]), 3), round(float(goal[1]), 3)]
+        where.append(round(float(np.rad2deg(goal[2])), 1))
+        return (
+            f"goto.pose: robot {self.ids[i]!r} has no way to {where} on the known map (every "
+            f"way there is narrower than its width, {2 * half:.2f} m)"
+        )
 
     def _goal_on_known_map(self, i: int, where: list, corners: np.ndarray) -> str:
         """:meth:`_goal_reachability` on the sensed map (footprint ``corners`` at the goal

@@ -124,6 +124,7 @@ class Supervisor(CommandsMixin):
         self.stopped = np.zeros(n, dtype=bool)
         self.estopped = False
         self._tick_start: float | None = None  # t at the start of the tick under way
+        self._goto_costmap: tuple | None = None  # (grid, half width, costmap) for goto checks
         self.teleop = np.zeros(n, dtype=bool)
         self._teleop_cmd = np.zeros((n, 2))
         self._teleop_t = np.full(n, -np.inf)
