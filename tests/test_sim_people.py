@@ -93,3 +93,26 @@ def test_person_walks_through_the_formation_without_contact_and_it_restores(rvo)
     assert moved.max() > 0.15  # skids in the walk made room ...
     err = np.linalg.norm(sup.sim.poses[:, :2] - start[:, :2], axis=1)
     assert err.max() <= 0.05  # ... and are back on their spots
+
+
+def test_a_person_standing_at_a_spot_is_named_as_the_cause_of_the_wait():
+    """A person stands on one of two spots for the whole run: the other skid parks, and the
+    deadlock report of the one whose spot it is says a person stands there (before, it read
+    "a local minimum of the potential field")."""
+    walls = [[[0, 0], [14, 0], [14, 0.3], [0, 0.3]], [[0, 7.7], [14, 7.7], [14, 8], [0, 8]]]
+    data = {
+        "name": "person-on-a-spot",
+        "duration_s": 30,
+        "map": {"size_m": [14, 8], "walls": walls},
+        "robots": [{"id": "a", "pose": [2.0, 2.5, 0]}, {"id": "b", "pose": [2.0, 5.5, 0]}],
+        "obstacles": [{"id": "p", "waypoints": [[10.5, 2.5], [10.5, 2.51]], "speed_mps": 0.01}],
+        "commands": [
+            {"at_s": 0, "goto": {"robot": "a", "pose": [10.5, 2.5, 0]}},
+            {"at_s": 0, "goto": {"robot": "b", "pose": [10.5, 5.5, 0]}},
+        ],
+    }
+    r = run_world(build_world(parse_scenario(data))).result
+    assert r["robots"]["b"]["parked"] and not r["robots"]["a"]["parked"]
+    causes = [d["cause"] for d in r["deadlocks"] if d["robot"] == "a"]
+    assert causes and all(c.startswith("a person stands 0.00 m from its spot") for c in causes)
+    assert r["collisions"] == []

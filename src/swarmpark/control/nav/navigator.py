@@ -120,6 +120,7 @@ class Navigator:
         self.making_room = np.zeros(0, dtype=bool)
         #: (N,) skids waiting for a bottleneck this tick (queued on purpose; not deadlocked).
         self.queued = np.zeros(0, dtype=bool)
+        self._view: ControlView | None = None  # the last tick's view (for :meth:`explain`)
         #: (N,) skids the fill order holds back that have come to where it stops them (near
         #: their boundary, or their own spot when following a skid bound deeper); kept while
         #: the hold lasts. Only these wait on purpose: a held skid farther out is on its way.
@@ -168,6 +169,7 @@ class Navigator:
         while len(self.robots) < n:
             self.robots.append(RobotNav())
         cmd = np.zeros((n, 2))
+        self._view = view
         idx = np.flatnonzero(view.active)
         if len(idx) == 0:
             return cmd
@@ -301,6 +303,9 @@ class Navigator:
         r = self.robots[i]
         if r.path.failed:
             return "no path to its goal on the known map", []
+        person = self._person_at_spot(i)
+        if person:
+            return person, []
         if r.manoeuvre.running():
             return "manoeuvring towards its goal", []
         if r.manoeuvre.walled:
@@ -315,6 +320,35 @@ class Navigator:
         if self.making_room is not None and i < len(self.making_room) and self.making_room[i]:
             return "making room for another skid", []
         return "moving without progress (a local minimum of the potential field)", []
+
+    def _person_at_spot(self, i: int) -> str:
+        """A person standing within the berth skids keep from standing people (the
+        people's ``clearance_m`` plus ``standing_berth_m``) of skid ``i``'s goal footprint,
+        as of the last tick: the skid cannot dock while they stand there."""
+        view, pp = self._view, self.params.people
+        if view is None or i >= len(view.poses) or not len(view.people_xy):
+            return ""
+        standing = np.linalg.norm(view.people_vel, axis=1) < pp.walking_mps
+        if not standing.any():
+            return ""
+        gx, gy, th = view.goals[i]
+        d = view.people_xy[standing] - (gx, gy)
+        bx = d[:, 0] * np.cos(th) + d[:, 1] * np.sin(th)  # in the goal's body frame
+        by = -d[:, 0] * np.sin(th) + d[:, 1] * np.cos(th)
+        body = view.footprints[i].corners_body()
+        (x0, y0), (x1, y1) = body.min(axis=0), body.max(axis=0)
+        out = np.hypot(
+            np.maximum.reduce([x0 - bx, bx - x1, 0 * bx]),
+            np.maximum.reduce([y0 - by, by - y1, 0 * by]),
+        )
+        gap = float(np.min(out - view.people_radius[standing]))
+        berth = pp.clearance_m + pp.standing_berth_m
+        if gap >= berth:
+            return ""
+        return (
+            f"a person stands {max(gap, 0.0):.2f} m from its spot (skids keep {berth:.2f} m "
+            "from a standing person)"
+        )
 
     def _yield(self, view: ControlView, idx: np.ndarray, raw: np.ndarray):
         """People's right of way (:mod:`.people`): the commands of skids ``idx`` and which
