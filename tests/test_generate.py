@@ -113,6 +113,25 @@ def test_unload_starts_parked_in_the_cabin_and_parks_in_the_hall(tmp_path):
         assert spacing.min(axis=1).max() <= widest + park.margin_m + 0.05
 
 
+def test_swap_groups_start_in_one_room_and_park_in_the_other(tmp_path):
+    for seed in range(4):
+        data = generate("swap", seed, robots=7)
+        world = build_world(load_scenario(write_scenario(data, tmp_path / f"s{seed}.yaml")))
+        parks = [c.park for c in world.scenario.commands]
+        assert len(parks) == 2
+        groups = [set(p.robots) for p in parks]
+        assert not groups[0] & groups[1] and len(groups[0] | groups[1]) == 7
+        # The dividing wall (door or corridor) lies between each group's starts and its box.
+        for park in parks:
+            box = np.array(park.boundary)
+            xs = [r.start[0] for r in world.robots if r.id in park.robots]
+            assert box[:, 0].min() > max(xs) + 1.0 or box[:, 0].max() < min(xs) - 1.0
+        east = [p for p in parks if np.array(p.boundary)[:, 0].min() > world.grid.size_m[0] / 2]
+        assert len(east) == 1  # one group parks in the east room, the other in the west
+    with pytest.raises(GenerateError, match=r"^robots: must be in 2\.\.60 \(got 1\)"):
+        generate("swap", 1, robots=1)
+
+
 @pytest.mark.parametrize(
     ("kind", "seed", "robots", "field"),
     [("warehouse", 1, None, "kind"), ("door", -1, None, "seed"), ("door", 1, 0, "robots")],

@@ -115,3 +115,33 @@ def test_a_skid_the_fill_order_holds_back_gets_no_grant_and_the_next_one_goes():
     # Released by the fill order, it gets the door in its turn (behind the convoy's gap).
     step(replace(view, t=10.0, hold=np.array([False, False])))
     assert states[0].zone == 1
+
+
+def test_a_convoy_goes_on_past_a_skid_waiting_the_other_way_for_convoy_max_s():
+    """Skid 1 (coming from the east) is refused the door while skid 0 crosses it from the
+    west. Skid 2, following skid 0, still goes (a corridor turning round costs a whole
+    crossing), until skid 1 has waited convoy_max_s: then skid 3 from the west waits,
+    though it stands nearer the door, and skid 1 goes next."""
+    poses = [[2.4, 3.0, 0.0], [7.8, 3.0, np.pi], [1.2, 3.0, 0.0], [0.5, 3.0, 0.0]]
+    goals = [[9.0, 3.0, 0.0], [1.0, 3.0, np.pi], [8.0, 2.5, 0.0], [8.0, 4.0, 0.0]]
+    view, paths = _setup(poses, goals)
+    p = TrafficParams(convoy_gap_s=2.0, convoy_max_s=30.0)
+    tc = TrafficControl(p)
+    states = [TrafficState() for _ in range(4)]
+
+    def step(t, xy, parked=(False, False, False, True)):
+        moved = np.array([[*q, h[2]] for q, h in zip(xy, poses, strict=True)], float)
+        fol = PathFollower(FollowerParams())
+        v = replace(view, t=t, poses=moved)
+        return tc.step(v, np.arange(4), np.zeros((4, 2)), paths, fol, states, np.array(parked))
+
+    step(0.0, [[2.4, 3.0], [7.8, 3.0], [1.2, 3.0], [0.5, 3.0]])
+    assert [s.zone for s in states] == [1, 0, 0, 0] and states[1].waiting == 1
+    step(2.0, [[4.5, 3.0], [7.8, 3.0], [2.4, 3.0], [0.5, 3.0]])
+    assert [s.zone for s in states] == [1, 0, 1, 0]  # skid 2 follows skid 0 past skid 1
+    assert states[1].waiting == 1 and states[1].refused_since == 0.0
+    # Skid 1 has waited convoy_max_s; skid 3 stands nearer the door than skid 1, and waits.
+    step(31.0, [[9.0, 3.0], [7.8, 3.0], [4.5, 3.0], [3.6, 3.0]], parked=(True, False, False, False))
+    assert [s.zone for s in states] == [0, 0, 1, 0] and states[3].waiting == 1
+    step(35.0, [[9.0, 3.0], [7.8, 3.0], [8.0, 2.5], [3.6, 3.0]], parked=(True, False, True, False))
+    assert states[1].zone == 1 and states[3].zone == 0 and states[3].waiting == 1

@@ -99,9 +99,10 @@ def test_the_committed_specs_load_and_the_200_site_measure_is_held_out():
         for j in spec.jobs
     }
     assert seen and not seen & {j.seed for j in jobs}
-    # The unload kind's held-out seeds are not its training seeds.
-    train, held = ({j.seed for j in specs[f"unload-{n}"].jobs} for n in ("train", "heldout"))
-    assert train and held and not train & held
+    # The unload and swap kinds' held-out seeds are not their training seeds.
+    for kind in ("unload", "swap"):
+        train, held = ({j.seed for j in specs[f"{kind}-{n}"].jobs} for n in ("train", "heldout"))
+        assert train and held and not train & held
 
 
 def test_flatten_keeps_scalars_and_counts_lists():

@@ -185,7 +185,7 @@ def _positive(text: str) -> float:
 #: here so that building the parser does not import the generator and the layout code.
 GENERATOR_KINDS = (
     "hangar", "elevator", "door", "corridor", "l-bay", "pass-through", "people", "open-deck",
-    "unload",
+    "unload", "swap",
 )  # fmt: skip
 
 

@@ -1,4 +1,4 @@
-"""Seeded site generator: random but valid parking scenarios of nine kinds, for sweeps.
+"""Seeded site generator: random but valid parking scenarios of ten kinds, for sweeps.
 
 ``swarmpark generate KIND --seed S [--robots N] --out FILE.yaml`` writes one scenario in the
 polygon-walls map form. Everything random comes from one ``numpy`` Generator seeded from
@@ -19,6 +19,7 @@ pass-through  a parked block of skids that a high-priority skid drives through (
 people        a hall where people walk through the parking area's aisles
 open-deck     a deck with few walls; the skids localize onboard (AMCL)
 unload        the fleet parked in an elevator's cabin drives out and parks in the hall
+swap          two groups change rooms through one door or corridor, each parking in the other's
 
 >>> data = generate("door", 3, robots=4)
 >>> data["name"], len(data["robots"]), data["expect"]
@@ -51,7 +52,9 @@ MAX_ATTEMPTS = 8
 #: Then this many more draws, leaving out what may not fit (an L-bay's pillars).
 LAST_RESORT_ATTEMPTS = 4
 #: Kinds whose fleet may mix footprints (pass-through keeps the paper's uniform block).
-MIXED_KINDS = ("hangar", "elevator", "door", "corridor", "l-bay", "people", "open-deck", "unload")
+MIXED_KINDS = (
+    "hangar", "elevator", "door", "corridor", "l-bay", "people", "open-deck", "unload", "swap",
+)  # fmt: skip
 
 
 class GenerateError(ValueError):
@@ -354,6 +357,66 @@ def _unload(ctx: _Ctx) -> _Site:
     return _Site(site.size, site.walls, starts, _rect(lo[0], lo[1], hi[0], hi[1]))
 
 
+def _swap(ctx: _Ctx) -> _Site:
+    """Two groups change sides through one bottleneck, a door or a corridor (drawn): about
+    half the fleet starts in the west room and parks in the east room, the rest the other way
+    round. In each room the group's start grid and the other group's park box lie side by
+    side along the dividing wall, in an order drawn per room."""
+    from dataclasses import replace
+
+    rng = ctx.rng
+    n_west = int(rng.integers(max(1, ctx.n // 2 - 1), min(ctx.n - 1, ctx.n // 2 + 1) + 1))
+    groups = ((0, n_west), (n_west, ctx.n))
+    subs = [replace(ctx, n=b - a, fps=ctx.fps[a:b]) for a, b in groups]
+    grids = [_start_grid(c) for c in subs]
+    sizes = [(cols * c.pitch, rows * c.pitch) for (cols, rows), c in zip(grids, subs, strict=True)]
+    boxes = [_box_dims(c) for c in subs]  # group k's box, in the other room
+    band = 1.5
+    # Room k holds group k's starts and the other group's box, one above the other.
+    room_w = [max(sizes[k][0], boxes[1 - k][0]) + 2 * band for k in (0, 1)]
+    room_h = [sizes[k][1] + boxes[1 - k][1] + 3 * band for k in (0, 1)]
+    h = _r(2 * WALL_T + max(room_h) + rng.uniform(0, 3))
+    if rng.random() < 0.5:  # a door in a wall
+        passage, cw = WALL_T, ctx.wmax + 2 * ctx.margin + float(rng.uniform(0.2, 1.2))
+    else:  # a corridor
+        passage, cw = float(rng.uniform(4, 12)), ctx.wmax + float(rng.uniform(1.0, 2.2))
+    xa = WALL_T + room_w[0]
+    xb = xa + passage
+    w = _r(xb + room_w[1] + WALL_T)
+    walls = _outer(w, h)
+    c0 = float(rng.uniform(WALL_T + 0.5, h - WALL_T - 0.5 - cw))
+    walls.append(_rect(xa, WALL_T, xb, c0))
+    walls.append(_rect(xa, c0 + cw, xb, h - WALL_T))
+    starts, box = [], [None, None]
+    for k, (x0, facing) in enumerate(((WALL_T, 0.0), (xb, 180.0))):
+        (cols, rows), (sw, sh), (bw, bh) = grids[k], sizes[k], boxes[1 - k]
+        inner = h - 2 * WALL_T - sh - bh - 3 * band  # spare height in this room
+        low = float(rng.uniform(0, max(inner, 0.0)))
+        starts_low = rng.random() < 0.5
+        y_s = WALL_T + band + (low if starts_low else bh + band + low)
+        y_b = WALL_T + band + (sh + band + low if starts_low else low)
+        sx = x0 + band + (room_w[k] - 2 * band - sw) * (1.0 if k == 0 else 0.0)
+        bx = x0 + band + (room_w[k] - 2 * band - bw) * (1.0 if k == 0 else 0.0)
+        starts += _starts(subs[k], sx, y_s, cols, rows, facing)
+        box[1 - k] = _rect(bx, y_b, bx + bw, y_b + bh)
+    ids = [f"g{i + 1}" for i in range(ctx.n)]
+    commands = [
+        {
+            "at_s": 0,
+            "park": {
+                "robots": ids[a:b],
+                "boundary": box[k],
+                "heading_deg": ctx.heading,
+                "method": "stacking",
+                "margin_m": _r(ctx.margin),
+                "assignment": "formation",
+            },
+        }
+        for k, (a, b) in enumerate(groups)
+    ]
+    return _Site((w, h), walls, starts, None, commands=commands)
+
+
 KINDS: dict[str, Callable[[_Ctx], _Site]] = {
     "hangar": _hangar,
     "elevator": _elevator,
@@ -363,7 +426,8 @@ KINDS: dict[str, Callable[[_Ctx], _Site]] = {
     "pass-through": _pass_through,
     "people": _people,
     "open-deck": _open_deck,
-    "unload": _unload,  # last: a kind's index seeds its draws
+    "unload": _unload,
+    "swap": _swap,  # last: a kind's index seeds its draws
 }
 
 
@@ -430,7 +494,7 @@ def generate(kind: str, seed: int, *, robots: int | None = None) -> dict:
         raise GenerateError(f"kind: unknown kind {kind!r} (known: {', '.join(KINDS)})")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise GenerateError(f"seed: must be an integer >= 0 (got {seed!r})")
-    low = 2 if kind == "pass-through" else 1
+    low = 2 if kind in ("pass-through", "swap") else 1
     if robots is not None and not (low <= robots <= 2 * MAX_ROBOTS):
         raise GenerateError(f"robots: must be in {low}..{2 * MAX_ROBOTS} (got {robots!r})")
     rng = np.random.default_rng([int(seed), list(KINDS).index(kind)])

@@ -17,6 +17,11 @@ with a grant:
   ago (counted from its grant: counted from when it entered, a 10-skid door site took 134 s
   against 116 s, the zone reaching 2.7 m round the door); a skid that the fill order holds
   back gets no grant (it would wait in the door);
+- a skid refused because skids coming the other way hold the zone does not stop the
+  convoy: the next skids from the convoy's side are still granted behind it, until it has
+  waited ``convoy_max_s``; from then on only its side goes next (through a corridor each
+  turn of the way costs a whole crossing; strictly first come, first served, two groups
+  changing rooms through one crossed one skid each way at a time);
 - a skid without a grant stops ``gap_m`` short of the zone (moving away stays allowed);
 - a grant ends when the skid leaves the zone, parks, or its path no longer crosses it.
 """
@@ -61,6 +66,8 @@ class TrafficState:
     side: int = 0
     since: float = 0.0
     waiting: int = 0
+    #: when it began to wait at the head of its zone's queue for skids coming the other way
+    refused_since: float | None = None
 
 
 class TrafficControl:
@@ -124,27 +131,70 @@ class TrafficControl:
                 continue
             asks.setdefault(ahead[0], []).append((ahead[1], i, ahead[2]))
         held = np.zeros(len(view.poses), dtype=bool) if view.hold is None else view.hold
+        heads: set[int] = set()
         for zone, queue in asks.items():
-            for _dist, i, side in sorted(queue):
-                if held[i]:
-                    # Held back by the fill order: no grant (it would wait in the door), and
-                    # the skids behind it, maybe the one it waits for, go ahead of it.
-                    states[i].waiting = zone
-                    continue
-                if self._grant(view, zone, side, states, p):
-                    st = states[i]
-                    st.zone, st.side, st.since = zone, side, view.t
-                    continue
-                # Not granted: this one and every one behind it wait (first come, first served).
-                for _, j, _ in sorted(queue):
-                    if states[j].zone == 0:
-                        states[j].waiting = zone
-                break
+            self._serve(view, zone, sorted(queue), states, held, heads)
+        for i in idx.tolist():
+            if i not in heads:
+                states[i].refused_since = None
         for k, i in enumerate(idx.tolist()):
             zone = states[i].waiting
             if zone and stop_short(view, i, cmd, z.polygons[zone - 1], p.gap_m, p.check_s):
                 waiting[k] = True
         return waiting
+
+    def _serve(self, view: ControlView, zone: int, queue, states, held, heads: set) -> None:
+        """Grant ``zone`` to the skids of its ``queue`` (sorted by path distance) that may
+        enter now; mark the others waiting. ``heads`` collects the skids refused for skids
+        coming the other way."""
+        p = self.params
+        refused = None  # the side of a skid refused for a convoy coming the other way
+        # A side refused for convoy_max_s: from now on only it goes next, however near the
+        # zone the convoy's next skid stands.
+        overdue = {
+            side
+            for _, i, side in queue
+            if states[i].refused_since is not None
+            and view.t - states[i].refused_since >= p.convoy_max_s
+        }
+        for _dist, i, side in queue:
+            st = states[i]
+            if held[i] or (overdue and side not in overdue):
+                # Held back by the fill order: no grant (it would wait in the door), and
+                # the skids behind it, maybe the one it waits for, go ahead of it. Or it
+                # would lengthen a convoy that an overdue side waits for.
+                st.waiting = zone
+                continue
+            if refused is not None:
+                # Behind a refused skid only the oncoming convoy's next skids go.
+                if side != refused and self._grant(view, zone, side, states, p):
+                    st.zone, st.side, st.since = zone, side, view.t
+                else:
+                    st.waiting = zone
+                continue
+            if self._grant(view, zone, side, states, p):
+                st.zone, st.side, st.since = zone, side, view.t
+                continue
+            if self._oncoming(zone, side, states):
+                # The zone is busy the other way: the convoy coming that way goes on while
+                # this skid has waited less than convoy_max_s (through a long corridor the
+                # way turning round costs a whole crossing).
+                heads.add(i)
+                if st.refused_since is None:
+                    st.refused_since = view.t
+                if view.t - st.refused_since < p.convoy_max_s:
+                    refused, st.waiting = side, zone
+                    continue
+            # Not granted: this one and every one behind it wait (first come, first served).
+            for _, j, _ in queue:
+                if states[j].zone == 0:
+                    states[j].waiting = zone
+            return
+
+    @staticmethod
+    def _oncoming(zone: int, side: int, states) -> bool:
+        """Skids coming the other way hold ``zone``."""
+        return any(st.zone == zone and st.side != side for st in states)
 
     @staticmethod
     def _grant(view: ControlView, zone: int, side: int, states, p: TrafficParams) -> bool:
