@@ -18,6 +18,15 @@ SCENARIOS = ROOT / "scenarios"
 DATA = ROOT / "tests" / "data"
 
 
+def assert_goto_refused(sup, robot: str, pose, reason: str, kept) -> None:
+    """A goto of ``robot`` to ``pose`` is refused with exactly ``reason``, and the robot keeps
+    its previous goal ``kept`` (a refused command changes nothing)."""
+    out = sup.command("goto", {"robot": robot, "pose": pose})
+    assert not out.accepted
+    assert out.reason == reason
+    np.testing.assert_allclose(sup.goals[sup.index[robot]], kept)
+
+
 def load_script(name: str):
     """``scripts/<name>.py`` of the repository, imported as a module."""
     spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")

@@ -5,6 +5,7 @@ not known, and the group is laid out again when the skids find it (supervisor/sp
 
 import numpy as np
 import pytest
+from helpers import assert_goto_refused
 from shapely.geometry import Polygon
 
 from swarmpark.core.geometry import body_corners, footprint_corners
@@ -154,13 +155,11 @@ def test_a_goto_is_checked_on_the_known_map_not_the_scenarios_obstacles():
     assert before.accepted  # no scan yet: the map alone does not show the crate
     sup.command("goto", {"robot": "a1", "pose": [3.0, 2.0, 0]})
     _run_until(sup, 1.0)
-    out = sup.command("goto", {"robot": "a1", "pose": [5.2, 1.7, 90]})
-    assert not out.accepted
-    assert out.reason == (
+    reason = (
         "goto.pose: robot 'a1' would overlap a wall or a detected obstacle of the known map "
         "at [5.2, 1.7, 90.0]"
     )
-    np.testing.assert_allclose(sup.goals[0], [3.0, 2.0, 0.0])
+    assert_goto_refused(sup, "a1", [5.2, 1.7, 90], reason, kept=[3.0, 2.0, 0.0])
     wall = sup.command("goto", {"robot": "a1", "pose": [8.0, 7.5, 0]})
     assert not wall.accepted and "overlap a wall" in wall.reason
     off = sup.command("goto", {"robot": "a1", "pose": [15.9, 4.0, 0]})
