@@ -198,7 +198,6 @@ class SimLink:
         held = self._hold.copy()
         step = sim.step(cmd, hold=held)
         self._hold &= ~held  # a stop that came during the step holds the next one
-
         self._publish(scan=self.sensing, step=step)
         return step
 

@@ -493,8 +493,9 @@ class Navigator:
         return FleetState(parked=parked, bound=bound, still=bound & held, waiting=waiting)
 
     def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
-        """Commands ``raw`` of skids ``idx`` not driven by this controller (teleop, formation plans), scaled
-        down by the collision monitor until their short forward simulation is free."""
+        """Commands ``raw`` of skids ``idx`` not driven by this controller (teleop, formation
+        plans), scaled down by the collision monitor until their short forward simulation is
+        free."""
         while len(self.robots) < len(view.poses):
             self.robots.append(RobotNav())
         self.scene.update(view)

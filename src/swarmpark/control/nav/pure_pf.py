@@ -133,8 +133,8 @@ class PurePotentialField:
         return cmd
 
     def guard(self, view: ControlView, idx: np.ndarray, raw: np.ndarray) -> np.ndarray:
-        """Commands ``raw`` of skids ``idx`` not driven here (teleop, formation plans), scaled down by the
-        collision monitor until their short forward simulation is free."""
+        """Commands ``raw`` of skids ``idx`` not driven here (teleop, formation plans), scaled
+        down by the collision monitor until their short forward simulation is free."""
         self._grow(len(view.poses))
         self.scene.update(view)
         idx = np.asarray(idx, int)
