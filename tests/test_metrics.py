@@ -5,7 +5,7 @@ import pytest
 from helpers import SCENARIOS, Scripted, make_world
 
 from swarmpark.apps.cli import _print_table
-from swarmpark.apps.run import run_world
+from swarmpark.apps.run import RunObserver, run_world
 from swarmpark.metrics import LOST_TIME, lower_bound_s
 
 
@@ -101,15 +101,9 @@ def test_deadlock_names_its_cause_from_the_navigator():
         },
     )
 
-    class SetGoal:
+    class SetGoal(RunObserver):
         def on_start(self, sup):
             sup._set_goals(np.array([0]), np.array([[7.0, 3.0, 0.0]]))
-
-        def on_tick(self, sup):
-            pass
-
-        def on_end(self, sup, result=None):
-            pass
 
     (dl,) = run_world(world, observers=[SetGoal()]).result["deadlocks"]
     assert dl["cause"] == "no path to its goal on the known map"

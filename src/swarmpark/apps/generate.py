@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -362,8 +362,6 @@ def _swap(ctx: _Ctx) -> _Site:
     half the fleet starts in the west room and parks in the east room, the rest the other way
     round. In each room the group's start grid and the other group's park box lie side by
     side along the dividing wall, in an order drawn per room."""
-    from dataclasses import replace
-
     rng = ctx.rng
     n_west = int(rng.integers(max(1, ctx.n // 2 - 1), min(ctx.n - 1, ctx.n // 2 + 1) + 1))
     groups = ((0, n_west), (n_west, ctx.n))

@@ -403,7 +403,7 @@ class Supervisor(CommandsMixin):
         # skid (a formation's paths are checked against the map once, but it is tracked
         # with errors, and the people it yields to may still step into it).
         guard = getattr(self.controller, "guard", None)
-        rows = np.flatnonzero(fresh | (self._formation_mask() & ~view.active))
+        rows = np.flatnonzero(fresh | self._formation_mask())
         if guard is not None and len(rows) and np.any(cmd[rows] != 0.0):
             cmd[rows] = guard(view, rows, cmd[rows])
         cmd[self.health.faulted] = 0.0

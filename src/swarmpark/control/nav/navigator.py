@@ -50,6 +50,7 @@ from swarmpark.control.nav.recovery import (
 from swarmpark.control.nav.scene import Scene
 from swarmpark.control.nav.traffic import TrafficControl, TrafficState
 from swarmpark.core.activity import ACTIVITIES
+from swarmpark.core.geometry import footprint_corners, rect_disc_gap
 
 __all__ = ["NavParams", "Navigator", "RobotNav"]
 
@@ -331,17 +332,11 @@ class Navigator:
         standing = np.linalg.norm(view.people_vel, axis=1) < pp.walking_mps
         if not standing.any():
             return ""
-        gx, gy, th = view.goals[i]
-        d = view.people_xy[standing] - (gx, gy)
-        bx = d[:, 0] * np.cos(th) + d[:, 1] * np.sin(th)  # in the goal's body frame
-        by = -d[:, 0] * np.sin(th) + d[:, 1] * np.cos(th)
-        body = view.footprints[i].corners_body()
-        (x0, y0), (x1, y1) = body.min(axis=0), body.max(axis=0)
-        out = np.hypot(
-            np.maximum.reduce([x0 - bx, bx - x1, 0 * bx]),
-            np.maximum.reduce([y0 - by, by - y1, 0 * by]),
+        body = view.footprints[i].corners_body()[None]
+        corners = np.repeat(footprint_corners(view.goals[i][None], body), standing.sum(), axis=0)
+        gap = float(
+            np.min(rect_disc_gap(corners, view.people_xy[standing], view.people_radius[standing]))
         )
-        gap = float(np.min(out - view.people_radius[standing]))
         berth = pp.clearance_m + pp.standing_berth_m
         if gap >= berth:
             return ""
