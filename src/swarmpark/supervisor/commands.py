@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 from shapely.geometry import Point, Polygon
-from shapely.ops import nearest_points
+from shapely.ops import nearest_points, unary_union
 
 from swarmpark import assign as assign_mod
 from swarmpark.core.geometry import GeometryError, as_simple_polygon, footprint_polygon
@@ -159,7 +159,7 @@ class CommandsMixin:
 
     def plan_layout(self, cmd: ParkCmd):
         """The layout a park command would produce (for previews); raises ValueError."""
-        from swarmpark.layout import layout
+        from swarmpark.layout import LayoutError, layout
 
         idx = self._robot_indices(cmd.robots, "park.robots")
         if isinstance(idx, str):
@@ -175,18 +175,52 @@ class CommandsMixin:
         heading = cmd.heading_deg if cmd.heading_deg == "auto" else np.deg2rad(cmd.heading_deg)
         fps = [self.info.footprints[i] for i in idx]
         opening = self._opening(idx, boundary, fps)
-        lay = layout(
-            boundary,
-            fps,
-            heading=heading,
-            method=cmd.method,
-            margin_m=cmd.margin_m,
-            obstacles=self._known_solids(boundary),
-            opening=opening,
-            # Room for a skid coming in to turn on the spot by the opening.
-            apron_m=2.0 * max(f.reach_m for f in fps),
-        )
+        names, places = self._standing_others(idx, boundary)
+        solids = self._known_solids(boundary)
+        if places:
+            solids = unary_union(places if solids is None else [solids, *places])
+        try:
+            lay = layout(
+                boundary,
+                fps,
+                heading=heading,
+                method=cmd.method,
+                margin_m=cmd.margin_m,
+                obstacles=solids,
+                opening=opening,
+                # Room for a skid coming in to turn on the spot by the opening.
+                apron_m=2.0 * max(f.reach_m for f in fps),
+            )
+        except LayoutError as exc:
+            if not names or exc.fits is None:
+                raise
+            shown = ", ".join(repr(n) for n in names[:5]) + (", ..." if len(names) > 5 else "")
+            raise LayoutError(
+                f"{exc}, clear of the {len(names)} other skid(s) that stand or park in it "
+                f"({shown})",
+                fits=exc.fits,
+            ) from None
         return idx, boundary, lay
+
+    def _standing_others(self, idx: np.ndarray, boundary: Polygon) -> tuple[list[str], list]:
+        """The skids outside a park command that will stand in its boundary, as their ids and
+        footprints there: a skid with a goal (parked, or bound for a spot of another group
+        or a goto) at its goal, a skid without one where it stands. The layout keeps clear
+        of them as of a wall: laid over an idle skid, a spot could never be taken (a new
+        user's site: one skid of six held before it for the whole run), and two groups sent
+        into one boundary were given the same spots. Skids driven by hand or in a running
+        formation are on the move and do not count."""
+        moving = self._formation_mask() | self.teleop
+        others = np.ones(self.n, dtype=bool)
+        others[idx] = False
+        names, places = [], []
+        for i in np.flatnonzero(others & ~moving):
+            pose = self.goals[i] if self.has_goal[i] else self.poses_known[i]
+            poly = footprint_polygon(pose, self.info.footprints[i])
+            if poly.intersects(boundary):
+                names.append(self.ids[i])
+                places.append(poly)
+        return names, places
 
     def _opening(self, idx: np.ndarray, boundary: Polygon, fps) -> tuple[float, float]:
         """Where skids ``idx`` come into ``boundary``: the mean of the points at which their
