@@ -30,9 +30,7 @@ def _scenario(**extra):
         "duration_s": 120,
         "map": {"size_m": [20, 14], "walls": WALLS},
         "robots": robots,
-        "commands": [
-            {"at_s": 0, "park": {"robots": [f"r{i}" for i in range(6)], "boundary": BOX}}
-        ],
+        "commands": [{"at_s": 0, "park": {"robots": [f"r{i}" for i in range(6)], "boundary": BOX}}],
     }
     data.update(extra)
     return build_world(parse_scenario(data))
