@@ -35,6 +35,16 @@ def load_script(name: str):
     return mod
 
 
+def hall_walls(width: float, height: float, t: float = 0.3) -> list:
+    """The four outer walls, ``t`` thick, of a ``width`` x ``height`` hall (scenario form)."""
+    return [
+        [[0, 0], [width, 0], [width, t], [0, t]],
+        [[0, height - t], [width, height - t], [width, height], [0, height]],
+        [[0, t], [t, t], [t, height - t], [0, height - t]],
+        [[width - t, t], [width, t], [width, height - t], [width - t, height - t]],
+    ]
+
+
 def make_world(**overrides):
     """A small open world (10 x 6 m) with one robot; keys override the scenario dict."""
     data = {

@@ -4,6 +4,7 @@ parking skid of another group at its goal."""
 
 import numpy as np
 import pytest
+from helpers import hall_walls
 from shapely.geometry import box
 
 from swarmpark.apps.run import run_world
@@ -12,12 +13,7 @@ from swarmpark.supervisor.core import Supervisor
 from swarmpark.world.scenario import ParkCmd, build_world, parse_scenario
 
 BOX = [[11, 4], [17, 4], [17, 10], [11, 10]]
-WALLS = [
-    [[0, 0], [20, 0], [20, 0.3], [0, 0.3]],
-    [[0, 13.7], [20, 13.7], [20, 14], [0, 14]],
-    [[0, 0.3], [0.3, 0.3], [0.3, 13.7], [0, 13.7]],
-    [[19.7, 0.3], [20, 0.3], [20, 13.7], [19.7, 13.7]],
-]
+WALLS = hall_walls(20, 14)
 
 
 def _scenario(**extra):
