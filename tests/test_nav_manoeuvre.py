@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
-from navkit import advance, make_view
+import pytest
+from helpers import hall_walls
+from navkit import FOOTPRINT, advance, make_view
+from scipy.spatial import cKDTree
 
+from swarmpark.apps.run import run_world
 from swarmpark.control.nav.follower import PathState
 from swarmpark.control.nav.manoeuvre import ManoeuvrePlanner, ManoeuvreState
 from swarmpark.control.nav.params import ManoeuvreParams
+from swarmpark.world.scenario import build_world, parse_scenario
 
 #: A spot with a pillar just below it and a parked neighbour on its left: the straight
 #: approach from below is blocked, the way in is from the right and a turn on the spot.
@@ -268,3 +273,95 @@ def test_a_skid_stuck_far_from_its_goal_manoeuvres_onto_its_path():
     stale = PathState(path=path.path, path_goal=np.array([1.0, 2.0, np.pi]))
     _, _, st = _far([stale])
     assert st.failed == 1
+
+
+#: A wall across the hall and a skid standing nose to it, 5 cm off (pivot 0.65 m from it,
+#: less than its reach of 0.72 m: it cannot turn on the spot).
+WALL = (4.0, 1.0, 4.3, 5.0)
+NOSE_IN = np.array([3.35, 3.0, 0.0])
+
+
+def _edges(b):
+    """The four sides of box ``b`` as point pairs."""
+    x0, y0, x1, y1 = b
+    c = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    return [(np.array(c[k]), np.array(c[(k + 1) % 4])) for k in range(4)]
+
+
+def test_a_skid_nose_to_a_wall_cannot_turn_on_the_spot_to_its_path():
+    planner = ManoeuvrePlanner(ManoeuvreParams())
+    view = make_view([NOSE_IN], boxes=[WALL])
+    near = cKDTree(np.vstack([np.linspace(a, b, 40) for a, b in _edges(WALL)]))
+    idx = np.array([0])
+    assert planner.cramped(view, idx, np.array([2.0]), near).tolist() == [True]
+    # Within cramped_rad of its path's heading it drives on as the field says.
+    assert planner.cramped(view, idx, np.array([0.1]), near).tolist() == [False]
+    # Moving, or 1 m back from the wall, it is not cramped.
+    moving = make_view([NOSE_IN], boxes=[WALL], vel=[[-0.2, 0.0]])
+    assert planner.cramped(moving, idx, np.array([2.0]), near).tolist() == [False]
+    roomy = make_view([NOSE_IN - [1.0, 0.0, 0.0]], boxes=[WALL])
+    assert planner.cramped(roomy, idx, np.array([2.0]), near).tolist() == [False]
+    # Off, never.
+    off = ManoeuvrePlanner(ManoeuvreParams(cramped=False))
+    assert off.cramped(view, idx, np.array([2.0]), near).tolist() == [False]
+
+
+def test_a_cramped_skid_backs_straight_out_then_turns_to_its_path_at_once():
+    """No wait for stuck_s: it backs out along its own heading until it can turn, turns to
+    its path's heading, and hands back to the path follower."""
+    p = ManoeuvreParams()
+    planner = ManoeuvrePlanner(p)
+    states = [ManoeuvreState()]
+    want = 2.0
+    view = make_view([NOSE_IN], [[1.0, 5.0, np.pi]], boxes=[WALL])
+    idx = np.array([0])
+    raw = np.zeros((1, 2))
+    out = planner.step(view, idx, raw, states, np.array([True]), None, None, np.array([True]),
+                       np.array([want]))  # fmt: skip
+    assert out.tolist() == [True] and raw[0, 0] < 0.0  # backing, on the first tick
+    segs = states[0].segments
+    assert [s[0] for s in segs] == ["reverse", "turn"]
+    back = segs[0][2]
+    assert abs(back[1] - NOSE_IN[1]) < 1e-9 and abs(back[2] - NOSE_IN[2]) < 1e-9  # straight
+    assert WALL[0] - back[0] >= FOOTPRINT.reach_m  # where the turn is clear
+    assert NOSE_IN[0] - back[0] <= p.escape_step_m * 2 + 1e-9  # and no farther than needed
+    for _ in range(200):
+        raw = np.zeros((1, 2))
+        planner.step(view, idx, raw, states, np.array([True]), None, None, np.array([False]),
+                     np.array([want]))  # fmt: skip
+        view = advance(view, raw)
+        if not states[0].running():
+            break
+    assert not states[0].running() and states[0].failed == 0
+    assert abs(np.angle(np.exp(1j * (view.poses[0, 2] - want)))) < np.deg2rad(3.0)
+    # Without the rule the same skid waits stuck_s before anything is planned.
+    planner = ManoeuvrePlanner(ManoeuvreParams(cramped=False))
+    states = [ManoeuvreState()]
+    view = make_view([NOSE_IN], [[1.0, 5.0, np.pi]], boxes=[WALL])
+    planner.step(view, idx, np.zeros((1, 2)), states, np.array([True]), None, None,
+                 np.array([True]), np.array([want]))  # fmt: skip
+    assert not states[0].running()
+
+
+@pytest.mark.slow
+def test_a_skid_parked_nose_to_a_wall_drives_out_and_parks():
+    """A new user's site: one skid standing 5 cm from a wall, facing it, sent to a spot 11 m
+    behind it. The field turned it broadside to the wall, where it shuffled for 20 s until
+    its manoeuvre (60.05 s to park against a bound of 22.9 s)."""
+    data = {
+        "name": "nose-to-wall",
+        "seed": 0,
+        "dt_s": 0.05,
+        "duration_s": 80,
+        "map": {"size_m": [20, 14], "walls": hall_walls(20, 14)},
+        "robots": [{"id": "k4", "pose": [0.95, 8.0, 180.0]}],
+        "commands": [
+            {
+                "at_s": 0,
+                "park": {"robots": ["k4"], "boundary": [[11, 4], [17, 4], [17, 10], [11, 10]]},
+            }
+        ],
+    }
+    r = run_world(build_world(parse_scenario(data))).result
+    assert r["success"] and r["collisions"] == [] and r["deadlocks"] == []
+    assert r["time_to_park_s"] < 40.0

@@ -25,7 +25,24 @@ from swarmpark.core.gridmap import refine_occupancy
 from swarmpark.core.progress import NAV_HEADING_LEVER_M, remaining_m
 from swarmpark.plan.lattice import footprint_clear, plan_manoeuvre, stamp_footprint
 
-__all__ = ["ManoeuvrePlanner", "ManoeuvreState"]
+__all__ = ["ManoeuvrePlanner", "ManoeuvreState", "turn_clear"]
+
+#: A skid slower than these stands still (for :meth:`ManoeuvrePlanner.cramped`).
+STILL_MPS = 0.02
+STILL_RADPS = 0.05
+#: The step of :func:`turn_clear`.
+TURN_STEP_RAD = float(np.deg2rad(5.0))
+
+
+def turn_clear(occ, origin, res: float, fp, pose: np.ndarray, want: float, grow_m: float) -> bool:
+    """Whether footprint ``fp`` turns on the spot at ``pose`` to heading ``want``, the short
+    way round, clear of the window ``occ`` (checked every 5 degrees, grown by ``grow_m``)."""
+    err = float(wrap_angle(want - pose[2]))
+    for a in np.append(np.arange(TURN_STEP_RAD, abs(err), TURN_STEP_RAD), abs(err)).tolist():
+        q = np.array([pose[0], pose[1], pose[2] + np.sign(err) * a])
+        if not footprint_clear(occ, origin, res, fp, q, grow_m):
+            return False
+    return True
 
 
 @dataclass
@@ -85,19 +102,27 @@ class ManoeuvrePlanner:
         eligible: np.ndarray,
         settled: np.ndarray | None = None,
         paths: list[PathState] | None = None,
+        cramped: np.ndarray | None = None,
+        want: np.ndarray | None = None,
     ) -> np.ndarray:
         """Replace the commands ``raw`` (rows of ``idx``) of the skids in a manoeuvre; start
         one for an ``eligible`` skid that made no progress for ``stuck_s`` (``near_stuck_s``
         within ``near_goal_m`` of its goal). Returns which rows are manoeuvring. ``settled``
         ``(N,)``: the skids that could make room; a skid for which no manoeuvre is found but
         one is without them is marked walled in. ``paths`` (per skid): the planned paths, for
-        a skid whose goal is too far for one window (:meth:`_via`)."""
+        a skid whose goal is too far for one window (:meth:`_via`). ``cramped`` (rows): the
+        skids that cannot turn on the spot to their path heading ``want`` (rows;
+        :meth:`cramped`), which wait only ``cramped_s`` and first try to get out straight
+        (:meth:`_unwedge`)."""
         p = self.params
         out = np.zeros(len(idx), dtype=bool)
         pose, goal = view.poses[idx], view.goals[idx]
         dist = np.linalg.norm(goal[:, :2] - pose[:, :2], axis=1)
         # Parking (near the goal) a skid waits near_stuck_s, on its way stuck_s.
-        wait_s = np.where(dist <= p.near_goal_m, p.near_stuck_s, p.stuck_s).tolist()
+        wait_s = np.where(dist <= p.near_goal_m, p.near_stuck_s, p.stuck_s)
+        if cramped is not None and p.cramped:
+            wait_s = np.where(cramped, np.minimum(wait_s, p.cramped_s), wait_s)
+        wait_s = wait_s.tolist()
         left = remaining_m(
             dist,
             np.abs(wrap_angle(goal[:, 2] - pose[:, 2])),
@@ -122,7 +147,8 @@ class ManoeuvrePlanner:
             if not st.running():
                 if view.t - st.best_t < wait_s[k] or view.t < st.retry_t:
                     continue
-                self._start(view, i, st, settled, None if paths is None else paths[i])
+                turn_to = want[k] if cramped is not None and cramped[k] else None
+                self._start(view, i, st, settled, None if paths is None else paths[i], turn_to)
                 if not st.running():
                     continue
             cmd = self._drive(view, i, st)
@@ -130,6 +156,28 @@ class ManoeuvrePlanner:
                 continue
             raw[k] = cmd
             out[k] = True
+        return out
+
+    def cramped(self, view: ControlView, idx: np.ndarray, want: np.ndarray, near) -> np.ndarray:
+        """Which of skids ``idx`` cannot turn on the spot to heading ``want`` (rows): standing
+        still, more than ``cramped_rad`` off it, a solid of the map within reach of the pivot
+        (``near``: a k-d tree of the map's outline points, or None) and the footprint, swept
+        the short way round in steps of 5 degrees, not clear of the map."""
+        p = self.params
+        out = np.zeros(len(idx), dtype=bool)
+        if not p.cramped or near is None or not len(idx):
+            return out
+        pose = view.poses[idx]
+        err = wrap_angle(want - pose[:, 2])
+        reach = np.array([view.footprints[i].reach_m for i in idx.tolist()])
+        gap, _ = near.query(pose[:, :2], distance_upper_bound=float(reach.max()))
+        grid = view.grid
+        still = (np.abs(view.vel[idx, 0]) < STILL_MPS) & (np.abs(view.vel[idx, 1]) < STILL_RADPS)
+        for k in np.flatnonzero(still & (np.abs(err) > p.cramped_rad) & (gap < reach)).tolist():
+            fp = view.footprints[idx[k]]
+            out[k] = not turn_clear(
+                grid.occupied, grid.origin, grid.resolution_m, fp, pose[k], float(want[k]), 0.0
+            )
         return out
 
     def _roamed(self, pose: np.ndarray, states: list[ManoeuvreState]) -> list[bool]:
@@ -221,17 +269,21 @@ class ManoeuvrePlanner:
         st: ManoeuvreState,
         settled: np.ndarray | None = None,
         path: PathState | None = None,
+        turn_to: float | None = None,
     ) -> None:
         p = self.params
         win = self._window(view, i)
         st.planned += 1
-        segments = None
+        # A cramped skid first tries the straight way out to where it can turn.
+        segments = None if turn_to is None else self._unwedge(view, i, turn_to)
         # A manoeuvre planned at the bare margin can leave the skid, stopped a few cm off a
         # planned turn point, inside the monitor's margin, which then holds it there (found on
         # a perturbed suite run: a turn in a doorway, planned again and held again for 150 s).
         # After such a hold the next one is planned roomy first.
         grows = (*p.roomy_grow_m, p.grow_m) if st.roomy else (p.grow_m,)
-        if win is None and path is not None:
+        if segments:
+            pass  # no lattice search
+        elif win is None and path is not None:
             segments = self._via(view, i, path, grows)
         elif win is not None:
             for grow in grows:
@@ -315,6 +367,32 @@ class ManoeuvrePlanner:
                 if rest is not None and len(rest.poses) >= 2:
                     return [(kind, pose.copy(), out), *rest.segments()]
         return plan.segments() if plan is not None and len(plan.poses) >= 2 else None
+
+    def _unwedge(self, view: ControlView, i: int, want: float) -> list | None:
+        """For a skid that cannot turn on the spot to heading ``want``: straight back, or on,
+        along its own heading to the nearest pose where it can (``escape_step_m`` steps, up to
+        ``escape_max_m``), then that turn; the path follower takes over from there. Checked
+        on the window round the skid (the map, the other skids and people) as :meth:`_plan`
+        checks a wedged skid's way out. None if there is no such pose."""
+        p = self.params
+        win = self._window(view, i, goal=view.poses[i])
+        if win is None:
+            return None
+        occ, origin, res = win
+        fp = view.footprints[i]
+        pose = view.poses[i]
+        half = res * np.sqrt(0.5)
+        head = np.array([np.cos(pose[2]), np.sin(pose[2]), 0.0])
+        for d in np.arange(p.escape_step_m, p.escape_max_m + 1e-9, p.escape_step_m):
+            for sign, kind in ((-1.0, "reverse"), (1.0, "forward")):
+                out = pose + sign * d * head
+                if not turn_clear(occ, origin, res, fp, out, want, p.grow_m + half):
+                    continue
+                shrink = -(half + p.skid_margin_m)
+                way = [pose + sign * x * head for x in np.arange(0.05, d, 0.05)]
+                if all(footprint_clear(occ, origin, res, fp, q, shrink) for q in way):
+                    return [(kind, pose.copy(), out), ("turn", out, np.array([*out[:2], want]))]
+        return None
 
     def _via(self, view: ControlView, i: int, path: PathState, grows) -> list | None:
         """A manoeuvre to a pose on skid ``i``'s path ahead, for a skid stuck farther from its

@@ -218,7 +218,16 @@ class Navigator:
         eligible = ~docked & ~waiting & ~fleet.waiting[idx] & use
         # Walled in is judged against the settled skids, which could make room.
         settled = self._settled(view)[0] if p.make_room.for_walled else None
-        man = self.manoeuvre.step(view, idx, raw, man_states, eligible, settled, paths)
+        # A skid that cannot turn on the spot to its path plans one sooner.
+        tight = eligible & ~final
+        cramped = np.zeros(len(idx), dtype=bool)
+        if use and tight.any():
+            cramped[tight] = self.manoeuvre.cramped(
+                view, idx[tight], targets[tight, 2], scene.static.kd if scene.static else None
+            )
+        man = self.manoeuvre.step(
+            view, idx, raw, man_states, eligible, settled, paths, cramped, targets[:, 2]
+        )
         for i in idx[man]:
             self.robots[i].dock.runup = False  # the docking starts afresh after it
         mraw = raw[man].copy()

@@ -193,6 +193,15 @@ class ManoeuvreParams:
     #: either way, 247 deadlock episodes against 260).
     near_goal_m: float = 2.0
     near_stuck_s: float = 5.0
+    #: A skid standing still that cannot turn on the spot to its path (its footprint, swept
+    #: from its heading to the path's by more than ``cramped_rad``, hits the map) plans one
+    #: after ``cramped_s`` without progress: the field cannot get it out, it only turned it
+    #: against the wall (a new user's site: a skid nose to a wall, 5 cm off it, turned
+    #: broadside to it and shuffled for 20 s before its manoeuvre). ``cramped`` off: as
+    #: any other skid.
+    cramped: bool = True
+    cramped_s: float = 0.0
+    cramped_rad: float = 0.2
     #: ... and has stayed within this distance of where it last got closer (a skid driving
     #: round an obstacle, away from its goal, is not stuck).
     roam_m: float = 1.0
@@ -262,6 +271,7 @@ class ManoeuvreParams:
     def __post_init__(self) -> None:
         _check(self, {"stuck_s": ">0", "progress_m": ">0", "window_margin_m": ">0"})
         _check(self, {"near_goal_m": ">=0", "near_stuck_s": ">0"})
+        _check(self, {"cramped_s": ">=0", "cramped_rad": ">0"})
         _check(self, {"roam_m": ">0", "escape_step_m": ">0", "escape_max_m": ">=0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
         _check(self, {"max_cell_m": ">0", "goal_tol_m": ">=0"})
