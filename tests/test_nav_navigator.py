@@ -143,3 +143,35 @@ def test_a_held_skid_far_from_its_stop_drives_on_to_it():
     view = replace(view, hold=np.array([False, False]))
     nav.compute(view)
     assert not nav.at_hold.any()
+
+
+def test_a_held_skid_whose_stop_moves_on_drives_on_to_it():
+    """Held outside its boundary, a skid waits at its stop; when the skid it follows is on
+    its way in, its hold moves to short of its own spot, farther on: it is on its way again,
+    not waiting (latched, a skid stood 4 m outside a dead-end bay until the one ahead had
+    parked, its command held still as a waiting skid's)."""
+    nav = Navigator()
+    boundary = box(6.0, 2.0, 10.0, 4.0)
+    spot = box(8.0, 2.6, 9.6, 3.4)
+    hold = np.array([True])
+    view = replace(
+        make_view([[3.0, 3.0, 0.0]], [[8.8, 3.0, 0.0]], goal_changed=[True], dt=0.05),
+        hold=hold,
+        hold_zones=(boundary,),
+    )
+    for _ in range(300):
+        cmd = nav.compute(view)
+        view = advance(view, cmd, hold=hold, hold_zones=(boundary,))
+    assert nav.at_hold[0]
+    x_stop = view.poses[0, 0]
+    view = replace(view, hold_zones=(spot,))
+    cmd = nav.compute(view)
+    assert not nav.at_hold[0] and cmd[0, 0] > 0.0  # on its way again
+    view = advance(view, cmd, hold=hold, hold_zones=(spot,))
+    for _ in range(300):
+        cmd = nav.compute(view)
+        view = advance(view, cmd, hold=hold, hold_zones=(spot,))
+    # ... to its new stop, where it waits.
+    assert view.poses[0, 0] > x_stop + 1.5 and nav.at_hold[0]
+    front = shapely.Polygon(footprint_corners(view.poses[:1], FOOTPRINT.corners_body()[None])[0])
+    assert HoldParams().gap_m <= front.distance(spot) <= HoldParams().gap_m + 0.3

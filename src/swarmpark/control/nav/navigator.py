@@ -126,6 +126,8 @@ class Navigator:
         #: their boundary, or their own spot when following a skid bound deeper); kept while
         #: the hold lasts. Only these wait on purpose: a held skid farther out is on its way.
         self.at_hold = np.zeros(0, dtype=bool)
+        #: Per skid, the bounds of the zone it was held outside of when it reached its stop.
+        self._held_at: list = []
         #: (N,) what each skid did on purpose this tick (codes into
         #: :data:`swarmpark.core.activity.ACTIVITIES`), for the run result's lost time.
         self.activity = np.zeros(0, dtype=np.int8)
@@ -413,15 +415,25 @@ class Navigator:
         ``idx`` are held outside. Updates :attr:`at_hold`: a skid counts as waiting from when
         it first reaches its stop until the hold ends (a follower held short of its spot
         stood still 21 m from it, its clock stopped, for 65 s on a generated corridor site,
-        taken for waiting)."""
+        taken for waiting). A skid whose hold moves (from outside its boundary to short of its
+        own spot, when the skid it follows is on its way in) is on its way again: latched, it
+        stood 4 m outside a dead-end bay, its command held still as a waiting skid's, until the
+        skid ahead had parked (a new user's site: each of five skids in file waited so)."""
         n = len(view.poses)
         held, at_stop = hold_outside(view, idx, cmd, self.params.hold)
+        zones = [
+            None if z is None else z.bounds
+            for z in (view.hold_zones if view.hold is not None else ())
+        ]
+        zones += [None] * (n - len(zones))
         reached = np.zeros(n, dtype=bool)
         reached[idx[at_stop]] = True
         if len(self.at_hold) == n:
-            reached |= self.at_hold
+            same = np.array([a == b for a, b in zip(self._held_at, zones, strict=True)], bool)
+            reached |= self.at_hold & same
         hold = np.zeros(n, dtype=bool) if view.hold is None else view.hold
         self.at_hold = reached & hold
+        self._held_at = zones
         return held
 
     def _make_room(
