@@ -232,6 +232,15 @@ def test_a_follower_keeps_off_its_spot_until_the_one_ahead_has_parked():
     # Robot 1 off its axis (turning): robot 2 keeps off its spot again.
     poses[1] = [3.0, 2.3, 0.4]
     assert fill_order.holds([group], poses)[1].tolist() == [False, False, True]
+    # Robot 1 coming in along the corridor 2 m out, 0.15 m beside its spot's axis and facing
+    # along it: its spot lies within the heading tolerance of straight ahead, so it is on
+    # its run in and robot 2 may close up (with only the 0.1 m position tolerance beside
+    # the axis, each skid of a file into a dead-end bay waited for the one ahead to park).
+    poses[1] = [2.1, 2.75, 0.0]
+    assert fill_order.holds([group], poses)[1].tolist() == [False, False, False]
+    # The same skid beside its axis by as much but 1 m out: a turn is left, robot 2 waits.
+    poses[1] = [3.1, 2.75, 0.0]
+    assert fill_order.holds([group], poses)[1].tolist() == [False, False, True]
 
 
 def test_skids_waiting_at_the_mouth_take_over_the_deeper_goals():

@@ -240,7 +240,10 @@ def _waits(g, poses: np.ndarray):
     rel = poses[g.robots, :2] - goal[:, :2]
     lateral = np.abs(rel[:, 1] * np.cos(goal[:, 2]) - rel[:, 0] * np.sin(goal[:, 2]))
     turning = np.zeros(len(g.goals), dtype=bool)
-    turning[g.goal_of] = (lateral > POSITION_TOL_M) | (head_err > HEADING_TOL_RAD)
+    along = np.abs(rel[:, 0] * np.cos(goal[:, 2]) + rel[:, 1] * np.sin(goal[:, 2]))
+    # On the run in, its spot lies within the heading tolerance of straight ahead (or behind).
+    off_line = lateral > np.maximum(POSITION_TOL_M, along * np.tan(HEADING_TOL_RAD))
+    turning[g.goal_of] = off_line | (head_err > HEADING_TOL_RAD)
     taken = frozenset(np.flatnonzero(filled).tolist())
     for row, (k, d) in enumerate(zip(g.goal_of, pos_err, strict=True)):
         first = [j for j in (g.blocks[k] if g.blocks else ()) if not filled[j]]
