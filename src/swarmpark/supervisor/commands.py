@@ -208,7 +208,7 @@ class CommandsMixin:
         or a goto) at its goal, a skid without one where it stands. The layout keeps clear
         of them as of a wall: laid over an idle skid, a spot could never be taken (a new
         user's site: one skid of six held before it for the whole run), and two groups sent
-        into one boundary were given the same spots. Skids driven by hand or in a running
+        into one boundary were given overlapping spots. Skids driven by hand or in a running
         formation are on the move and do not count."""
         moving = self._formation_mask() | self.teleop
         others = np.ones(self.n, dtype=bool)

@@ -126,7 +126,8 @@ class Navigator:
         #: their boundary, or their own spot when following a skid bound deeper); kept while
         #: the hold lasts. Only these wait on purpose: a held skid farther out is on its way.
         self.at_hold = np.zeros(0, dtype=bool)
-        #: Per skid, the bounds of the zone it was held outside of when it reached its stop.
+        #: Per skid, the bounds of its hold zone on the last tick (a hold that moves ends the
+        #: wait at its stop).
         self._held_at: list = []
         #: (N,) what each skid did on purpose this tick (codes into
         #: :data:`swarmpark.core.activity.ACTIVITIES`), for the run result's lost time.
