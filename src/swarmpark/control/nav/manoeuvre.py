@@ -169,11 +169,14 @@ class ManoeuvrePlanner:
             return out
         pose = view.poses[idx]
         err = wrap_angle(want - pose[:, 2])
-        reach = np.array([view.footprints[i].reach_m for i in idx.tolist()])
-        gap, _ = near.query(pose[:, :2], distance_upper_bound=float(reach.max()))
-        grid = view.grid
         still = (np.abs(view.vel[idx, 0]) < STILL_MPS) & (np.abs(view.vel[idx, 1]) < STILL_RADPS)
-        for k in np.flatnonzero(still & (np.abs(err) > p.cramped_rad) & (gap < reach)).tolist():
+        cand = np.flatnonzero(still & (np.abs(err) > p.cramped_rad))
+        if not len(cand):
+            return out
+        reach = np.array([view.footprints[i].reach_m for i in idx[cand].tolist()])
+        gap, _ = near.query(pose[cand, :2], distance_upper_bound=float(reach.max()))
+        grid = view.grid
+        for k in cand[gap < reach].tolist():
             fp = view.footprints[idx[k]]
             out[k] = not turn_clear(
                 grid.occupied, grid.origin, grid.resolution_m, fp, pose[k], float(want[k]), 0.0
