@@ -275,10 +275,10 @@ class ManoeuvrePlanner:
         turn_to: float | None = None,
     ) -> None:
         p = self.params
-        win = self._window(view, i)
         st.planned += 1
         # A cramped skid first tries the straight way out to where it can turn.
         segments = None if turn_to is None else self._unwedge(view, i, turn_to)
+        win = None if segments else self._window(view, i)
         # A manoeuvre planned at the bare margin can leave the skid, stopped a few cm off a
         # planned turn point, inside the monitor's margin, which then holds it there (found on
         # a perturbed suite run: a turn in a doorway, planned again and held again for 150 s).
@@ -348,27 +348,15 @@ class ManoeuvrePlanner:
         plan = plan_manoeuvre(occ, origin, res, fp, pose, goal, **kw)
         if plan is not None and plan.start_free:
             return plan.segments() if len(plan.poses) >= 2 else None
-        half = res * np.sqrt(0.5)
-        grow = grow_m + half
-        head = np.array([np.cos(pose[2]), np.sin(pose[2]), 0.0])
-        for d in np.arange(p.escape_step_m, p.escape_max_m + 1e-9, p.escape_step_m):
-            for sign, kind in ((-1.0, "reverse"), (1.0, "forward")):
-                out = pose + sign * d * head
-                if not footprint_clear(occ, origin, res, fp, out, grow):
-                    continue
-                # The way out is checked on the footprint shrunk by half a cell diagonal and
-                # by the margin the other skids are stamped with: the skid may already stand
-                # within those (the monitor keeps 3 cm; with only the half cell, every way out
-                # failed and a skid by a pillar stood 16 s, 0.5 m from its spot, on a generated
-                # hangar). A solid in the way still fails it; the collision monitor guards
-                # the run itself.
-                shrink = -(half + p.skid_margin_m)
-                way = [pose + sign * x * head for x in np.arange(0.05, d, 0.05)]
-                if not all(footprint_clear(occ, origin, res, fp, q, shrink) for q in way):
-                    continue
-                rest = plan_manoeuvre(occ, origin, res, fp, out, goal, **kw)
-                if rest is not None and len(rest.poses) >= 2:
-                    return [(kind, pose.copy(), out), *rest.segments()]
+        grow = grow_m + res * np.sqrt(0.5)
+
+        def clear(out):
+            return footprint_clear(occ, origin, res, fp, out, grow)
+
+        for kind, out in self._straight_out(occ, origin, res, fp, pose, clear):
+            rest = plan_manoeuvre(occ, origin, res, fp, out, goal, **kw)
+            if rest is not None and len(rest.poses) >= 2:
+                return [(kind, pose.copy(), out), *rest.segments()]
         return plan.segments() if plan is not None and len(plan.poses) >= 2 else None
 
     def _unwedge(self, view: ControlView, i: int, want: float) -> list | None:
@@ -377,25 +365,43 @@ class ManoeuvrePlanner:
         ``escape_max_m``), then that turn; the path follower takes over from there. Checked
         on the window round the skid (the map, the other skids and people) as :meth:`_plan`
         checks a wedged skid's way out. None if there is no such pose."""
-        p = self.params
         win = self._window(view, i, goal=view.poses[i])
         if win is None:
             return None
         occ, origin, res = win
         fp = view.footprints[i]
         pose = view.poses[i]
-        half = res * np.sqrt(0.5)
+        grow = self.params.grow_m + res * np.sqrt(0.5)
+
+        def turns(out):
+            return turn_clear(occ, origin, res, fp, out, want, grow)
+
+        end = next(self._straight_out(occ, origin, res, fp, pose, turns), None)
+        if end is None:
+            return None
+        kind, out = end
+        return [(kind, pose.copy(), out), ("turn", out, np.array([*out[:2], want]))]
+
+    def _straight_out(self, occ, origin, res: float, fp, pose: np.ndarray, good):
+        """Poses straight back, or on, along the skid's own heading (``escape_step_m`` steps
+        up to ``escape_max_m``, the nearest first, back before on) where ``good(pose)`` holds
+        and the way there is clear, as ``(kind, pose)``. The way is checked on the footprint
+        shrunk by half a cell diagonal and by the margin the other skids are stamped with:
+        the skid may already stand within those (the monitor keeps 3 cm; with only the half
+        cell, every way out failed and a skid by a pillar stood 16 s, 0.5 m from its spot, on
+        a generated hangar). A solid in the way still fails it; the collision monitor guards
+        the run itself."""
+        p = self.params
+        shrink = -(res * np.sqrt(0.5) + p.skid_margin_m)
         head = np.array([np.cos(pose[2]), np.sin(pose[2]), 0.0])
         for d in np.arange(p.escape_step_m, p.escape_max_m + 1e-9, p.escape_step_m):
             for sign, kind in ((-1.0, "reverse"), (1.0, "forward")):
                 out = pose + sign * d * head
-                if not turn_clear(occ, origin, res, fp, out, want, p.grow_m + half):
+                if not good(out):
                     continue
-                shrink = -(half + p.skid_margin_m)
                 way = [pose + sign * x * head for x in np.arange(0.05, d, 0.05)]
                 if all(footprint_clear(occ, origin, res, fp, q, shrink) for q in way):
-                    return [(kind, pose.copy(), out), ("turn", out, np.array([*out[:2], want]))]
-        return None
+                    yield kind, out
 
     def _via(self, view: ControlView, i: int, path: PathState, grows) -> list | None:
         """A manoeuvre to a pose on skid ``i``'s path ahead, for a skid stuck farther from its
