@@ -365,3 +365,32 @@ def test_a_skid_parked_nose_to_a_wall_drives_out_and_parks():
     r = run_world(build_world(parse_scenario(data))).result
     assert r["success"] and r["collisions"] == [] and r["deadlocks"] == []
     assert r["time_to_park_s"] < 40.0
+
+
+def test_a_way_in_round_the_back_beyond_the_window_is_not_walled_in():
+    """A spot in a column of parked skids, one parked in front of it too: the way in is round
+    the column's end and back in from behind, which leaves the skid's own window (here 1 m).
+    The wider window finds it, so the skid is not taken for walled in (which would make the
+    column open across its middle); with the wider window off, it is."""
+    goal = [6.0, 3.0, 0.0]
+    parked = [[6.0, 4.05, 0.0], [6.0, 1.95, 0.0], [4.6, 3.0, 0.0]]
+    poses = [[2.0, 3.0, 0.0], *parked]
+    settled = np.array([False, True, True, True])
+
+    def start(params):
+        view = make_view(poses, [goal, *parked], active=[True, False, False, False])
+        planner = ManoeuvrePlanner(params)
+        st = ManoeuvreState()
+        planner._start(view, 0, st, settled=settled)
+        return st
+
+    narrow = ManoeuvreParams(window_margin_m=1.0, wide_margin_m=0.0)
+    st = start(narrow)
+    assert st.walled and st.segments is None
+    st = start(ManoeuvreParams(window_margin_m=1.0, wide_margin_m=3.5))
+    assert not st.walled and st.segments
+    # It ends on the spot, and backs in from behind the column (east of it).
+    end = st.segments[-1][2]
+    assert np.hypot(end[0] - goal[0], end[1] - goal[1]) < 0.06
+    assert st.segments[-1][0] == "reverse"
+    assert max(s[2][0] for s in st.segments) > goal[0] + 0.6

@@ -221,18 +221,21 @@ class ManoeuvrePlanner:
         i: int,
         leave_out: np.ndarray | None = None,
         goal: np.ndarray | None = None,
+        margin_m: float | None = None,
     ):
         """The occupancy of the window around skid ``i`` and its goal (or ``goal``): the map,
         the other skids where they stand (grown by ``skid_margin_m``; not those in
-        ``leave_out``) and the people."""
+        ``leave_out``) and the people. ``margin_m``: the window's margin, ``window_margin_m``
+        if None (a wider one for a goal whose own window is within ``max_window_m``)."""
         p = self.params
         grid = view.grid
         res = grid.resolution_m
         goal = view.goals[i] if goal is None else goal
         pts = np.vstack([view.poses[i, :2], goal[:2]])
-        lo = pts.min(axis=0) - p.window_margin_m
-        hi = pts.max(axis=0) + p.window_margin_m
-        if np.any(hi - lo > p.max_window_m):
+        margin = p.window_margin_m if margin_m is None else margin_m
+        lo = pts.min(axis=0) - margin
+        hi = pts.max(axis=0) + margin
+        if np.any(hi - lo > p.max_window_m + 2.0 * (margin - p.window_margin_m)):
             return None
         h, w = grid.shape
         c0 = max(int(np.floor((lo[0] - grid.origin[0]) / res)), 0)
@@ -294,11 +297,16 @@ class ManoeuvrePlanner:
                 if segments:
                     break
         if not segments:
-            # Walled in by settled skids: a way exists with them left out.
+            # Walled in by settled skids: no way in a wider window either, but a way with
+            # them left out.
             others = settled is not None and np.any(np.delete(settled, i))
             if win is not None and others and not st.walled:
-                occ = self._window(view, i, leave_out=settled)
-                st.walled = bool(self._plan(view, i, *occ, p.grow_m))
+                if p.wide_margin_m > p.window_margin_m:
+                    wide = self._window(view, i, margin_m=p.wide_margin_m)
+                    segments = self._plan(view, i, *wide, p.grow_m) if wide else None
+                if not segments:
+                    occ = self._window(view, i, leave_out=settled)
+                    st.walled = bool(self._plan(view, i, *occ, p.grow_m))
             if win is not None and not st.walled and p.goal_tol_m > 0:
                 # Last, where the walls alone leave no way to the goal's cell, a way that ends
                 # beside it (a spot by a wall reached only along a line of cell centres beside

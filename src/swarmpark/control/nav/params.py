@@ -209,6 +209,13 @@ class ManoeuvreParams:
     #: ``max_window_m`` on a side (farther goals are left to the path planner's repairs).
     window_margin_m: float = 2.5
     max_window_m: float = 14.0
+    #: Where no manoeuvre is found in that window, one is searched for in a window grown by
+    #: ``wide_margin_m`` before the skid counts as walled in by the parked skids (which then
+    #: make room for it): a way round the back of a row, a few metres beyond the window,
+    #: is a way in (a generated hangar: a skid whose spot was reached only round its
+    #: column was taken for walled in, and the block that made room for it across its
+    #: middle never closed again; 12 of 20 parked). At most ``window_margin_m``: off.
+    wide_margin_m: float = 5.0
     #: A skid stuck farther from its goal than one window reaches plans a manoeuvre to a pose
     #: on its path instead: this far along it from where it stands (the first that is clear
     #: and reached), at the path's heading there (from its points ``via_tangent_m`` before
@@ -274,6 +281,7 @@ class ManoeuvreParams:
         _check(self, {"cramped_s": ">=0", "cramped_rad": ">0"})
         _check(self, {"roam_m": ">0", "escape_step_m": ">0", "escape_max_m": ">=0"})
         _check(self, {"max_window_m": ">0", "skid_margin_m": ">=0", "person_margin_m": ">=0"})
+        _check(self, {"wide_margin_m": ">=0"})
         _check(self, {"max_cell_m": ">0", "goal_tol_m": ">=0"})
         _check(
             self,
