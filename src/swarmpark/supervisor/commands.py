@@ -532,10 +532,17 @@ class CommandsMixin:
     def _formation_mask(self) -> np.ndarray:
         """Robots currently driven by a formation plan (until it ends, plus a grace time)."""
         mask = np.zeros(self.n, dtype=bool)
-        for f in self.formations:
-            if self.t - f.t0 <= f.adjuster.plan.duration_s + FORMATION_GRACE_S:
-                mask[f.idx] = True
+        for f in self._running_formations():
+            mask[f.idx] = True
         return mask
+
+    def _running_formations(self) -> list:
+        """The formation plans still driving their skids (until each ends, plus a grace time)."""
+        return [
+            f
+            for f in self.formations
+            if self.t - f.t0 <= f.adjuster.plan.duration_s + FORMATION_GRACE_S
+        ]
 
     def stop(self, names) -> Outcome:
         idx = self._robot_indices(names, "stop")

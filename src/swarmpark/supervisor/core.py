@@ -33,7 +33,7 @@ from swarmpark.plan.spot_reach import manoeuvre_blocks, manoeuvre_order, spot_wi
 from swarmpark.sim.link import SimLink
 from swarmpark.sim.simulator import Simulator, StepResult
 from swarmpark.supervisor import fill_order, reports
-from swarmpark.supervisor.commands import FORMATION_GRACE_S, CommandsMixin, Outcome, ParkGroup
+from swarmpark.supervisor.commands import CommandsMixin, Outcome, ParkGroup
 from swarmpark.supervisor.health import Health, HealthParams
 from swarmpark.supervisor.sensing import OnboardSensing
 from swarmpark.supervisor.spot_watch import SpotWatch
@@ -385,17 +385,16 @@ class Supervisor(CommandsMixin):
         """``(N, 2)`` velocity commands: the controller's, the formation plans', teleop."""
         cmd = np.asarray(self.controller.compute(view), float).reshape(self.n, 2)
         cmd[~view.active] = 0.0
-        for f in self.formations:
-            if self.t - f.t0 <= f.adjuster.plan.duration_s + FORMATION_GRACE_S:
-                go = ~self.stopped[f.idx] & ~self.teleop[f.idx] & (not self.estopped)
-                fc = f.command(
-                    self.t,
-                    self.poses_known[f.idx],
-                    view.people_xy,
-                    self.info.max_speed_mps[f.idx],
-                    self.info.max_yaw_rate_radps[f.idx],
-                )
-                cmd[f.idx] = np.where(go[:, None], fc, 0.0)
+        for f in self._running_formations():
+            go = ~self.stopped[f.idx] & ~self.teleop[f.idx] & (not self.estopped)
+            fc = f.command(
+                self.t,
+                self.poses_known[f.idx],
+                view.people_xy,
+                self.info.max_speed_mps[f.idx],
+                self.info.max_yaw_rate_radps[f.idx],
+            )
+            cmd[f.idx] = np.where(go[:, None], fc, 0.0)
         fresh = self.teleop & (self.t - self._teleop_t <= TELEOP_TIMEOUT_S)
         cmd[fresh] = self._teleop_cmd[fresh]
         # Teleop and the formation plans go through the collision monitor too: the command is
