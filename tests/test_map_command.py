@@ -21,10 +21,14 @@ def test_map_command_writes_a_map_that_agrees_with_the_hangar(tmp_path, capsys):
     summary = json.loads(capsys.readouterr().out)
     grid = load_map_yaml(out)
     assert grid.shape == (400, 600) and grid.occupied.any()
-    # The committed map that hangar-park-amcl-built parks in is this run's output.
+    # The committed map that hangar-park-amcl-built parks in is this run's output, to within
+    # a few cells: the same code gives the same map on one machine every time, but not
+    # bit for bit on every machine (on an AMD EPYC, 2 occupied and 2 unknown cells of
+    # 240 000 differ from the map committed from another, presumably in the last bits of
+    # the floating point).
     committed = load_map_yaml(SCENARIOS / "maps" / "hangar-built.yaml")
-    np.testing.assert_array_equal(grid.occupied, committed.occupied)
-    np.testing.assert_array_equal(grid.unknown, committed.unknown)
+    assert np.count_nonzero(grid.occupied != committed.occupied) <= 10
+    assert np.count_nonzero(grid.unknown != committed.unknown) <= 10
     agree = summary["map_agreement"]
     # Measured (the loop and the two legs through the middle): every observed cell right, all
     # the observable cells observed, wall precision 1.00 and recall 1.00; after the loop
