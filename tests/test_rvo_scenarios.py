@@ -109,10 +109,12 @@ def test_twenty_skids_cross_a_circle_to_the_antipodal_points():
 def test_the_circle_also_parks_with_the_default_stack():
     """The 20-skid circle without its ``navigation`` key (the collision monitor with right of
     way, no velocity obstacles): every skid parks within tolerance, with no collision, given
-    170 s (152.5 s measured; with RVO, the file's key, 88.9 s)."""
+    330 s. How long it takes is chaotic: 152.5 s on one machine, 267.8 s on another (AMD
+    EPYC), and 170.9-251.0 s there with the start poses moved by 2 mm and 0.1 deg (eight
+    draws, all parked, no contact). With RVO, the file's key, 88.9 s."""
     data = yaml.safe_load((SCENARIOS / "circle-20-antipodal.yaml").read_text())
     del data["navigation"]
-    data["duration_s"] = 170.0
+    data["duration_s"] = 330.0
     r = run_world(build_world(parse_scenario(data, SCENARIOS))).result
     assert r["success"] and r["collisions"] == []
     for rid, s in r["robots"].items():
