@@ -134,6 +134,7 @@ def test_rollout_respects_the_acceleration_limit():
         ({"scales": (1.0, 0.5)}, "scales"),
         ({"samples": 0}, "samples"),
         ({"horizon_s": 0}, "horizon_s"),
+        ({"step_samples_s": -0.1}, "step_samples_s"),
     ],
 )
 def test_monitor_params_name_the_bad_field(kw, name):
@@ -254,3 +255,31 @@ def test_two_skids_closing_head_on_are_checked_together_before_they_are_within_r
     res = _check(view, raw)
     assert np.array_equal(res.commands[0], raw[0])  # the skid of higher rank goes on
     assert np.array_equal(res.commands[1], [0.0, 0.0]) and res.blockers[1] == {0}
+
+
+def test_a_corner_swinging_past_a_standing_skid_between_samples_is_caught():
+    # A generated elevator (seed 1001, starts moved by 1 cm, session 38's variant B): skid 1
+    # (1.0 x 0.7 m) backs and turns beside skid 0 (1.2 x 0.8 m) standing. Its corner passes
+    # skid 0's within 0.15 s and swings clear again, between the rollout's 0.2 s samples; the
+    # next ticks' contacts fell between samples too (0.10 s, then 0.05 s ahead), until the
+    # simulator stopped it in contact.
+    poses = np.array([[7.31890751, 9.95852936, 0.09199988], [8.2956422, 10.87174615, 0.25658308]])
+    fps = (Footprint(1.2, 0.8, 0.6), Footprint(1.0, 0.7, 0.5))
+    view = replace(
+        make_view(poses, dt=0.05, max_accel=0.5),
+        vel=np.array([[0.0, 0.0], [-0.04115996, 0.06150305]]),
+        footprints=fps,
+        max_yaw_accel=np.full(2, 2.0),
+    )
+    raw = np.array([[-0.13224664, -0.28173253]])
+    mon = CollisionMonitor(MonitorParams())
+    body = [f.corners_body() for f in fps]
+    for _ in range(20):
+        scene = Scene(0.1, MonitorParams().margin_m).update(view)
+        cmd = mon.check(view, np.array([1]), raw, scene, straight=True).commands
+        # The simulator's step: the command within the acceleration limits, then integrated.
+        dv = np.clip(cmd[0] - view.vel[1], [-0.025, -0.1], [0.025, 0.1])
+        vel = np.array([[0.0, 0.0], view.vel[1] + dv])
+        view = advance(view, vel)
+        a, b = (Polygon(footprint_corners(view.poses[k][None], body[k][None])[0]) for k in (0, 1))
+        assert a.distance(b) > 0.0, f"touched at t = {view.t:.2f} s"

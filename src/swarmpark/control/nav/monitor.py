@@ -108,8 +108,19 @@ class CollisionMonitor:
         self.params = params
         p = params
         self.scales = np.asarray(p.scales)
-        self.times = np.linspace(p.horizon_s / p.samples, p.horizon_s, p.samples)
+        self._coarse = np.linspace(p.horizon_s / p.samples, p.horizon_s, p.samples)
+        self.times, self._dt = self._coarse, None
         self._fps, self._fps_reach = None, 0.0
+
+    def _sample_times(self, dt: float) -> None:
+        """Set :attr:`times` for control step ``dt``: the horizon's ``samples`` and every step
+        over its first ``step_samples_s``."""
+        if dt == self._dt:
+            return
+        steps = dt * np.arange(1, int(np.floor(self.params.step_samples_s / dt + 1e-9)) + 1)
+        times = np.concatenate([steps[steps < self._coarse[-1] - 1e-9], self._coarse])
+        times = np.unique(np.round(times, 9))
+        self.times, self._dt = times, dt
 
     def check(
         self,
@@ -127,6 +138,7 @@ class CollisionMonitor:
         contact (:meth:`joint_check`); with ``straight``, a skid whose every speed collides
         only because of its turn drives on straight when that is safe. ``robots=False``
         ignores the other skids."""
+        self._sample_times(view.dt)
         scales, S = self.scales, len(self.scales)
         body = scene.skids.grown[idx]
         plain = scene.skids.plain[idx]
@@ -357,6 +369,7 @@ class CollisionMonitor:
         skids turning towards each other on a generated open deck closed to 1 cm between
         their estimates, and 1.2 cm of relative localization error made that a contact.
         """
+        self._sample_times(view.dt)
         moving = np.flatnonzero(np.any(out != 0.0, axis=1))
         if len(moving) < 2:
             return
@@ -430,6 +443,7 @@ class CollisionMonitor:
         ORCA should prevent that, but its guarantee is for one step and holonomic centres.
         The stopped skids' braking is rolled out again, until no new pair is found.
         """
+        self._sample_times(view.dt)
         times = self.times
         reach = self._max_circumradius(view.footprints) * 2.0
         # Two skids closing at their current speed plus their top speed over the horizon.

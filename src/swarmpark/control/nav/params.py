@@ -447,6 +447,12 @@ class MonitorParams:
     horizon_s: float = 1.0
     #: Rollout samples over the horizon.
     samples: int = 5
+    #: Over this first stretch of the horizon the rollout is also sampled at every control
+    #: step. A corner swinging past a neighbour's comes and goes between samples 0.2 s apart:
+    #: a skid backing and turning beside a standing one on a generated elevator was judged
+    #: safe tick after tick, its contact 0.15 s, then 0.10 s, then 0.05 s ahead, until it
+    #: touched.
+    step_samples_s: float = 0.3
     #: Fractions of the commanded speed tried, fastest first; the last must be 0 (turn only).
     scales: tuple[float, ...] = (1.0, 0.6, 0.3, 0.0)
     #: Extra clearance the monitor keeps (the localization error is about 2 cm).
@@ -461,6 +467,7 @@ class MonitorParams:
 
     def __post_init__(self) -> None:
         _check(self, {"horizon_s": ">0", "samples": "int>0", "margin_m": ">=0"})
+        _check(self, {"step_samples_s": ">=0"})
         _check(self, {"neighbour_range_m": ">0"})
         s = self.scales
         numbers = isinstance(s, tuple) and all(_is_number(x) for x in s)
