@@ -274,11 +274,12 @@ def test_a_corner_swinging_past_a_standing_skid_between_samples_is_caught():
     raw = np.array([[-0.13224664, -0.28173253]])
     mon = CollisionMonitor(MonitorParams())
     body = [f.corners_body() for f in fps]
+    limit = np.array([view.max_accel[1], view.max_yaw_accel[1]]) * view.dt
     for _ in range(20):
         scene = Scene(0.1, MonitorParams().margin_m).update(view)
         cmd = mon.check(view, np.array([1]), raw, scene, straight=True).commands
         # The simulator's step: the command within the acceleration limits, then integrated.
-        dv = np.clip(cmd[0] - view.vel[1], [-0.025, -0.1], [0.025, 0.1])
+        dv = np.clip(cmd[0] - view.vel[1], -limit, limit)
         vel = np.array([[0.0, 0.0], view.vel[1] + dv])
         view = advance(view, vel)
         a, b = (Polygon(footprint_corners(view.poses[k][None], body[k][None])[0]) for k in (0, 1))
