@@ -275,8 +275,9 @@ def test_a_corner_swinging_past_a_standing_skid_between_samples_is_caught():
     mon = CollisionMonitor(MonitorParams())
     body = [f.corners_body() for f in fps]
     limit = np.array([view.max_accel[1], view.max_yaw_accel[1]]) * view.dt
+    scene = Scene(0.1, MonitorParams().margin_m)
     for _ in range(20):
-        scene = Scene(0.1, MonitorParams().margin_m).update(view)
+        scene.update(view)
         cmd = mon.check(view, np.array([1]), raw, scene, straight=True).commands
         # The simulator's step: the command within the acceleration limits, then integrated.
         dv = np.clip(cmd[0] - view.vel[1], -limit, limit)
