@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from swarmpark.core.geometry import Footprint, footprint_corners, integrate_unicycle
-from swarmpark.plan.lattice import HEADING_STEPS, HEADINGS, plan_manoeuvre, rect_mask
+from swarmpark.plan.lattice import (
+    HEADING_STEPS,
+    HEADINGS,
+    free_masks,
+    plan_manoeuvre,
+    rect_mask,
+)
 
 FP = Footprint(1.2, 0.8, 0.6)
 RES = 0.05
@@ -48,6 +54,38 @@ def test_rect_mask_covers_the_footprint():
     # 1.2 m long about a middle pivot and 0.8 m wide: 13 x 9 cell centres at 0.1 m.
     assert (cols.max() - cols.min() + 1, rows.max() - rows.min() + 1) == (13, 9)
     assert mask[r, r]
+
+
+@pytest.mark.parametrize("fp", [FP, Footprint(1.5, 0.6, 0.3)])
+def test_free_masks_match_the_footprint_placed_at_every_cell(fp):
+    """Where the pivot may stand, found at once for 16 headings and 16 half-way headings, is
+    where the footprint's cell mask, placed on the cell, covers no occupied cell and does not
+    leave the window (outside counts as occupied): checked cell by cell on a room open on one
+    side, with boxes and scattered single cells."""
+    rng = np.random.default_rng(7)
+    occ = _room([(1.0, 1.0, 1.6, 2.2), (3.1, 3.0, 3.3, 4.4)], size=(4.5, 5.0))
+    occ |= rng.random(occ.shape) < 0.004
+    occ[:, -2:] = False  # open on the right: the window's edge is all that bounds it there
+    grow = 0.02
+    free, turn_free = free_masks(occ, fp, RES, grow)
+    full = grow + RES * np.sqrt(0.5)
+    mids = np.arctan2(
+        np.sin(HEADINGS) + np.sin(np.roll(HEADINGS, -1)),
+        np.cos(HEADINGS) + np.cos(np.roll(HEADINGS, -1)),
+    )
+    h, w = occ.shape
+    for got, heading in [(free[k], HEADINGS[k]) for k in (0, 1, 2, 5)] + [
+        (turn_free[k], mids[k]) for k in (0, 3, 9)
+    ]:
+        mask = rect_mask(fp, heading, RES, full)
+        r = mask.shape[0] // 2
+        padded = np.pad(occ, r, constant_values=True)
+        want = np.array(
+            [[not np.any(padded[y : y + 2 * r + 1, x : x + 2 * r + 1] & mask) for x in range(w)]
+             for y in range(h)]
+        )  # fmt: skip
+        assert want.any() and not want.all()
+        np.testing.assert_array_equal(got, want)
 
 
 def test_into_a_spot_that_only_a_turn_on_the_spot_reaches():
