@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 from navkit import make_view
 
-from swarmpark.control.nav.follower import PathFollower, PathState, point_at, station
+from swarmpark.control.nav.follower import (
+    PackedPaths,
+    PathFollower,
+    PathState,
+    paths_ahead,
+    point_at,
+    station,
+)
 from swarmpark.control.nav.params import FollowerParams
 
 PATH = np.array([[1.0, 3.0], [5.0, 3.0], [5.0, 5.0]])  # 4 m along x, then 2 m up
@@ -163,6 +170,38 @@ def test_fleet_targets_match_the_per_robot_projection_exactly():
         assert (~want[1]).sum() > 5  # the lookahead branch was exercised
         for i in rng.choice(n, 10, replace=False):
             states[i].path = random_path(int(rng.integers(0, 6 + 10 * round_)))
+
+
+def test_paths_ahead_match_the_path_walked_one_skid_at_a_time():
+    """Each mover's way for making room: from its rear (its front when reversing) through
+    its pivot and the path's vertices to ``length_m`` ahead of where it projects, bit for bit
+    as walked with :func:`station` and :func:`point_at` one skid at a time."""
+    rng = np.random.default_rng(5)
+    n = 30
+    poses = np.column_stack([rng.uniform(0, 10, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    view = make_view(poses, poses.copy())
+    states = [
+        PathState(
+            path=None if k % 7 == 0 else np.cumsum(rng.uniform(-2, 2, (k % 6 + 2, 2)), axis=0),
+            reverse=bool(k % 3 == 0),
+        )
+        for k in range(n)
+    ]
+    rows = np.flatnonzero(rng.random(n) < 0.7)
+    got = paths_ahead(view, rows, states, PackedPaths(), 2.5)
+    for line, i in zip(got, rows.tolist(), strict=True):
+        pose, fp, st = view.poses[i], view.footprints[i], states[i]
+        head = np.array([np.cos(pose[2]), np.sin(pose[2])])
+        back = pose[:2] - head * (fp.length_m - fp.pivot if st.reverse else fp.pivot)
+        if st.path is None:
+            want = np.vstack([back, pose[:2]])
+        else:
+            cum, j, s_here = station(st.path, pose[:2], st.geometry())
+            end = min(s_here + 2.5, cum[-1])
+            tip, _ = point_at(st.path, cum, end)
+            want = np.vstack([back, pose[:2], st.path[j + 1 :][cum[j + 1 :] < end], tip])
+        np.testing.assert_array_equal(line, want)
+    assert sum(len(line) > 3 for line in got) > 5  # vertices inside the lookahead were kept
 
 
 def test_waiting_is_false_only_for_a_plan_made_for_the_current_goal():

@@ -145,3 +145,28 @@ def test_a_convoy_goes_on_past_a_skid_waiting_the_other_way_for_convoy_max_s():
     assert [s.zone for s in states] == [0, 0, 1, 0] and states[3].waiting == 1
     step(35.0, [[9.0, 3.0], [7.8, 3.0], [8.0, 2.5], [3.6, 3.0]], parked=(True, False, True, False))
     assert states[1].zone == 1 and states[3].zone == 0 and states[3].waiting == 1
+
+
+def test_points_judged_far_from_every_zone_find_no_zone_ahead():
+    """The shortcut that skips the walk along a skid's path: from a point it judges far from
+    the zones, no path of the lookahead's length reaches one (checked on random paths from
+    random points of the hall, some of them through the door)."""
+    rng = np.random.default_rng(11)
+    view, _ = _setup([[2.0, 3.0, 0.0]], [[9.0, 3.0, 0.0]])
+    params = TrafficParams(lookahead_m=2.0)  # the hall is 10 m long
+    tc = TrafficControl(params)
+    tc.prepare(view)
+    z = tc.zones
+    starts = rng.uniform([0.3, 0.3], [9.7, 5.7], (400, 2))
+    far = tc._far_from_zones(z, starts)
+    assert 0 < far.sum() < len(far)
+    seen = 0
+    for start, is_far in zip(starts, far, strict=True):
+        turns = rng.uniform(-np.pi, np.pi, 4)
+        legs = np.column_stack([np.cos(turns), np.sin(turns)]) * rng.uniform(0.3, 1.0, (4, 1))
+        st = PathState(path=np.vstack([start, start + np.cumsum(legs, axis=0)]))
+        got = tc._ahead(view, 0, st, 0.0, z)
+        if is_far:
+            assert got == (0, 0.0, 0)
+        seen += got[0] != 0
+    assert seen > 10  # paths from the points near the door do reach it

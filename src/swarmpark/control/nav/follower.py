@@ -315,17 +315,36 @@ class PathFollower:
         return out
 
 
-def path_ahead(view: ControlView, i: int, state: PathState, length_m: float) -> np.ndarray:
-    """Skid ``i``'s path from its rear to ``length_m`` ahead of its pivot (a polyline)."""
-    path = state.path
-    pose = view.poses[i]
-    fp = view.footprints[i]
-    head = np.array([np.cos(pose[2]), np.sin(pose[2])])
-    back = pose[:2] - head * (fp.length_m - fp.pivot if state.reverse else fp.pivot)
-    if path is None or len(path) < 2:
-        return np.vstack([back, pose[:2]])
-    cum, j, s_here = station(path, pose[:2], state.geometry())
-    s_end = min(s_here + length_m, cum[-1])
-    inner = path[j + 1 :][cum[j + 1 :] < s_end]
-    tip, _ = point_at(path, cum, s_end)
-    return np.vstack([back, pose[:2], inner, tip])
+def paths_ahead(
+    view: ControlView,
+    rows: np.ndarray,
+    states: list[PathState],
+    packed: PackedPaths,
+    length_m: float,
+) -> list[np.ndarray]:
+    """Skids ``rows``' paths from their rears to ``length_m`` ahead of their pivots (a polyline
+    each), projected for all of them at once on ``packed`` (refilled from ``states`` first)."""
+    packed.update(states)
+    fps = [view.footprints[i] for i in rows.tolist()]
+    pose = view.poses[rows]
+    back_m = np.array(
+        [
+            f.length_m - f.pivot if states[i].reverse else f.pivot
+            for i, f in zip(rows.tolist(), fps, strict=True)
+        ]
+    )
+    head = np.column_stack([np.cos(pose[:, 2]), np.sin(pose[:, 2])])
+    back = pose[:, :2] - head * back_m[:, None]
+    out = [np.vstack([back[k], pose[k, :2]]) for k in range(len(rows))]
+    use = np.flatnonzero(packed.nseg[rows] > 0)
+    if not len(use):
+        return out
+    on = rows[use]
+    j, s_here = packed.project(on, pose[use, :2])
+    s_end = np.minimum(s_here + length_m, packed.cum[on, packed.nseg[on]])
+    tip, _ = packed.point_at(on, s_end)
+    for k, i, jk, end, t in zip(use.tolist(), on.tolist(), j.tolist(), s_end, tip, strict=True):
+        path = states[i].path
+        cum = packed.cum[i, jk + 1 : len(path)]
+        out[k] = np.vstack([back[k], pose[k, :2], path[jk + 1 :][cum < end], t])
+    return out

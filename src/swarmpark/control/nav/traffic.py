@@ -81,6 +81,8 @@ class TrafficControl:
         # Derived from the zones, on demand (only skids standing in a zone need them).
         self._joins: list[tuple[int, ...]] | None = None
         self._distance: dict[int, np.ndarray] = {}
+        self._zone_m: np.ndarray | None = None
+        self._zone_on_edge = False
 
     def prepare(self, view: ControlView) -> None:
         """Find the map's bottlenecks now (before the first tick)."""
@@ -92,8 +94,29 @@ class TrafficControl:
         if self.zones is None or self._grid is not view.grid or self._fps != fps:
             self.zones = zones_for(view.grid, fps, self.params)
             self._grid, self._fps = view.grid, fps
-            self._joins, self._distance = None, {}
+            self._joins, self._distance, self._zone_m = None, {}, None
         return self.zones
+
+    def _far_from_zones(self, z: Bottlenecks, xy: np.ndarray) -> np.ndarray:
+        """``(K,)`` bool: points ``xy`` from which no point within ``lookahead_m`` lies in a
+        zone cell (the distance from the point's cell centre to the nearest zone cell centre
+        exceeds the lookahead by two cells), so :meth:`_ahead` finds no zone along a path
+        from there. Points off the grid count on its edge cells, so with a zone on the edge
+        the disc must lie on the grid too. Only saves work: it never changes what
+        :meth:`_ahead` returns."""
+        if self._zone_m is None:
+            self._zone_m = ndimage.distance_transform_edt(z.zone == 0) * z.resolution_m
+            edge = np.concatenate([z.zone[0], z.zone[-1], z.zone[:, 0], z.zone[:, -1]])
+            self._zone_on_edge = bool(edge.any())
+        res, reach = z.resolution_m, self.params.lookahead_m + 2.0 * z.resolution_m
+        r, c = z.cells(xy)
+        far = self._zone_m[r, c] > reach
+        if self._zone_on_edge:
+            h, w = z.zone.shape
+            lo = z.origin + reach
+            hi = z.origin + np.array([w, h]) * res - reach
+            far &= np.all((xy >= lo) & (xy <= hi), axis=1)
+        return far
 
     def step(
         self,
@@ -119,12 +142,14 @@ class TrafficControl:
         pk.update(paths)
         s_here = np.full(len(view.poses), np.nan)
         rows = idx[(pk.nseg[idx] > 0) & pk.is_for(idx, view.goals[idx])]
+        far = np.zeros(len(view.poses), dtype=bool)
         if len(rows):
             s_here[rows] = pk.project(rows, view.poses[rows, :2])[1]
+            far[rows] = self._far_from_zones(z, pk.point_at(rows, s_here[rows])[0])
         for i in idx.tolist():
             st = states[i]
             st.waiting = 0
-            ahead = self._ahead(view, i, paths[i], s_here[i], z)
+            ahead = (0, 0.0, 0) if far[i] else self._ahead(view, i, paths[i], s_here[i], z)
             if st.zone and (parked[i] or (here[i] != st.zone and ahead[0] != st.zone)):
                 st.zone = 0  # left the zone (or parked, or no longer going through it)
             if st.zone or ahead[0] == 0 or parked[i]:
