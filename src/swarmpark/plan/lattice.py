@@ -52,6 +52,7 @@ __all__ = [
     "cells_near",
     "footprint_clear",
     "free_masks",
+    "heading_masks",
     "plan_manoeuvre",
     "rect_mask",
     "snap_state",
@@ -165,6 +166,18 @@ def free_masks(occ: np.ndarray, fp: Footprint, res: float, grow_m: float):
     return out[:_K], out[_K:]
 
 
+def heading_masks(fp: Footprint, res: float, grow_m: float) -> np.ndarray:
+    """``(32, S, S)`` bool: footprint ``fp``'s cell masks (:func:`rect_mask`) at the 16 grid
+    headings, then at the 16 half-way headings (heading ``k`` to ``k + 1``: the turns), grown
+    by ``grow_m`` and half a cell diagonal."""
+    grow = grow_m + res * np.sqrt(0.5)
+    mids = [
+        np.arctan2(np.sin(a) + np.sin(b), np.cos(a) + np.cos(b))
+        for a, b in zip(HEADINGS, np.roll(HEADINGS, -1), strict=True)
+    ]
+    return np.array([rect_mask(fp, h, res, grow) for h in (*HEADINGS, *mids)])
+
+
 @dataclass(frozen=True)
 class _MaskRuns:
     """The 32 masks of :func:`free_masks` (16 headings, then the 16 half-way headings) as runs
@@ -187,13 +200,7 @@ def _mask_runs(
     length_m: float, width_m: float, pivot: float, res: float, grow_m: float
 ) -> _MaskRuns:
     """The masks of :func:`free_masks` for a footprint, cell size and growth, as runs."""
-    fp = Footprint(length_m, width_m, pivot)
-    grow = grow_m + res * np.sqrt(0.5)
-    mids = [
-        np.arctan2(np.sin(a) + np.sin(b), np.cos(a) + np.cos(b))
-        for a, b in zip(HEADINGS, np.roll(HEADINGS, -1), strict=True)
-    ]
-    masks = np.array([rect_mask(fp, h, res, grow) for h in (*HEADINGS, *mids)])
+    masks = heading_masks(Footprint(length_m, width_m, pivot), res, grow_m)
     r = masks.shape[1] // 2
     ii, jj = np.mgrid[-r : r + 1, -r : r + 1]
     rad = np.hypot(ii, jj)

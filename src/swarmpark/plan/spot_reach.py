@@ -25,9 +25,8 @@ from swarmpark.core.geometry import Footprint, footprint_polygon
 from swarmpark.core.gridmap import refine_occupancy
 from swarmpark.plan.lattice import (
     HEADING_STEPS,
-    HEADINGS,
     cells_near,
-    rect_mask,
+    heading_masks,
     snap_state,
     stamp_footprint,
 )
@@ -396,18 +395,13 @@ _K = len(HEADING_STEPS)
 def _masks(fp: Footprint, res: float, grow_m: float) -> np.ndarray:
     """``(33, S, S)``: the 16 heading masks, the 16 half-way (turn) masks and the
     turn-all-round disc, grown as :func:`swarmpark.plan.lattice.free_masks` grows them."""
-    grow = grow_m + res * np.sqrt(0.5)
-    heads = [rect_mask(fp, a, res, grow) for a in HEADINGS]
-    mids = []
-    for k in range(_K):
-        a, b = HEADINGS[k], HEADINGS[(k + 1) % _K]
-        mid = np.arctan2(np.sin(a) + np.sin(b), np.cos(a) + np.cos(b))
-        mids.append(rect_mask(fp, mid, res, grow))
-    size = heads[0].shape[0]
+    masks = heading_masks(fp, res, grow_m)
+    grow = grow_m + res * np.sqrt(0.5)  # as heading_masks grows the rectangle
+    size = masks.shape[1]
     off = (np.arange(size) - size // 2) * res
     dx, dy = np.meshgrid(off, off)
     disc = np.hypot(dx, dy) <= fp.reach_m + grow
-    return np.stack(heads + mids + [disc]).astype(float)
+    return np.concatenate([masks, disc[None]]).astype(float)
 
 
 def _hits(occ: np.ndarray, masks: np.ndarray) -> np.ndarray:

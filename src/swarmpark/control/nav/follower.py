@@ -335,8 +335,12 @@ def paths_ahead(
     )
     head = np.column_stack([np.cos(pose[:, 2]), np.sin(pose[:, 2])])
     back = pose[:, :2] - head * back_m[:, None]
-    out = [np.vstack([back[k], pose[k, :2]]) for k in range(len(rows))]
     use = np.flatnonzero(packed.nseg[rows] > 0)
+    # No usable path: from the rear to the pivot.
+    out = [
+        np.vstack([back[k], pose[k, :2]]) if n == 0 else None
+        for k, n in enumerate(packed.nseg[rows])
+    ]
     if not len(use):
         return out
     on = rows[use]

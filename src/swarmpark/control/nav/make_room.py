@@ -24,6 +24,7 @@ it is *cut off* (:func:`cut_off`) and plans its way back round as a skid on the 
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,13 +70,15 @@ class _Ways:
     intersecting the shapes with the ways' union, without building the union (the union of a
     fleet's ways was a fifth of a 22-skid door site's run time)."""
 
-    def __init__(self, geoms, tree: shapely.STRtree | None = None, extra=None) -> None:
-        self.tree = shapely.STRtree(list(geoms)) if tree is None else tree
-        self.extra = extra
+    def __init__(self, geoms) -> None:
+        self.tree = shapely.STRtree(list(geoms))
+        self.extra = None  # one more way, tested on its own (see plus)
 
     def plus(self, geom) -> _Ways:
-        """These ways and ``geom``."""
-        return _Ways((), self.tree, geom)
+        """These ways and ``geom`` (sharing the tree)."""
+        out = copy.copy(self)
+        out.extra = geom
+        return out
 
     def hits(self, shapes: np.ndarray) -> np.ndarray:
         """``(len(shapes),)`` bool: the shapes that meet a way."""
