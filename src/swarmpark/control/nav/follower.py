@@ -335,17 +335,15 @@ def paths_ahead(
     )
     head = np.column_stack([np.cos(pose[:, 2]), np.sin(pose[:, 2])])
     back = pose[:, :2] - head * back_m[:, None]
-    use = np.flatnonzero(packed.nseg[rows] > 0)
+    nseg = packed.nseg[rows]
+    use = np.flatnonzero(nseg > 0)
     # No usable path: from the rear to the pivot.
-    out = [
-        np.vstack([back[k], pose[k, :2]]) if n == 0 else None
-        for k, n in enumerate(packed.nseg[rows])
-    ]
+    out = [np.vstack([back[k], pose[k, :2]]) if n == 0 else None for k, n in enumerate(nseg)]
     if not len(use):
         return out
     on = rows[use]
     j, s_here = packed.project(on, pose[use, :2])
-    s_end = np.minimum(s_here + length_m, packed.cum[on, packed.nseg[on]])
+    s_end = np.minimum(s_here + length_m, packed.cum[on, nseg[use]])
     tip, _ = packed.point_at(on, s_end)
     for k, i, jk, end, t in zip(use.tolist(), on.tolist(), j.tolist(), s_end, tip, strict=True):
         path = states[i].path
