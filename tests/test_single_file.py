@@ -40,3 +40,11 @@ def test_a_line_of_four_crosses_a_generated_door_in_order_and_parks(tmp_path):
     result, cross = mod.run(path, 4, 0.4)
     assert result["success"] and result["collisions"] == []
     assert np.all(np.isfinite(cross)) and np.all(np.diff(cross) > 0)
+    # A line passes the door in single file, so it takes no less than the single-file floor
+    # of scripts/door_floor.py (straight runs at top speed, a body length apart at the door).
+    starts = np.array([r["pose"][:2] for r in line["robots"]])
+    spots = np.array([r["final_pose"][:2] for r in result["robots"].values()])
+    floor = load_script("door_floor").single_file_floor(
+        np.linalg.norm(starts - door, axis=1), np.linalg.norm(spots - door, axis=1), 1.2, 0.5, 0.0
+    )
+    assert 0.0 < floor <= result["time_to_park_s"]
