@@ -13,9 +13,10 @@ straight to its spot at top speed, never turning or braking. Skid k (in order of
 to the door) passes the door no sooner than ``max(t[k-1] + (L + gap) / v, S[k] / v)``, ``S``
 the sorted straight-line distances from the starts to the door; the spots are handed out
 farthest first, which minimises the latest arrival (pairing sorted times with reverse-sorted
-distances). Straight lines are no longer than any path through the door, so every real
-single file takes at least this long; a faster park needs skids through the door side by
-side. Sites without exactly one zone are skipped and listed.
+distances). Straight lines are no longer than any path through the door, so a single file
+(one skid behind another, nose to tail along the way through the door) takes at least this
+long; a faster park needs skids through the door side by side, or crossing it at angles
+that let them pass closer than a body length apart. Sites without exactly one zone are skipped and listed.
 """
 
 from __future__ import annotations
