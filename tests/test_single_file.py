@@ -45,6 +45,10 @@ def test_a_line_of_four_crosses_a_generated_door_in_order_and_parks(tmp_path):
     starts = np.array([r["pose"][:2] for r in line["robots"]])
     spots = np.array([r["final_pose"][:2] for r in result["robots"].values()])
     floor = load_script("door_floor").single_file_floor(
-        np.linalg.norm(starts - door, axis=1), np.linalg.norm(spots - door, axis=1), 1.2, 0.5, 0.0
+        np.linalg.norm(starts - door, axis=1),
+        np.linalg.norm(spots - door, axis=1),
+        data["robot_defaults"]["footprint"]["length_m"],
+        0.5,  # the default top speed: the line's skids set none
+        0.0,
     )
     assert 0.0 < floor <= result["time_to_park_s"]
