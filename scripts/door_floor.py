@@ -16,7 +16,8 @@ farthest first, which minimises the latest arrival (pairing sorted times with re
 distances). Straight lines are no longer than any path through the door, so a single file
 (one skid behind another, nose to tail along the way through the door) takes at least this
 long; a faster park needs skids through the door side by side, or crossing it at angles
-that let them pass closer than a body length apart. Sites without exactly one zone are skipped and listed.
+that let them pass closer than a body length apart. Sites without exactly one zone are
+skipped and listed.
 """
 
 from __future__ import annotations

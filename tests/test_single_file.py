@@ -7,6 +7,7 @@ import yaml
 from helpers import load_script
 
 from swarmpark.apps.generate import generate, write_scenario
+from swarmpark.world.scenario import RobotDefaults
 
 
 def test_crossings_are_the_first_pass_over_the_door_line():
@@ -48,7 +49,7 @@ def test_a_line_of_four_crosses_a_generated_door_in_order_and_parks(tmp_path):
         np.linalg.norm(starts - door, axis=1),
         np.linalg.norm(spots - door, axis=1),
         data["robot_defaults"]["footprint"]["length_m"],
-        0.5,  # the default top speed: the line's skids set none
+        RobotDefaults().max_speed_mps,  # the line's skids set none
         0.0,
     )
     assert 0.0 < floor <= result["time_to_park_s"]
