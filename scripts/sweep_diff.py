@@ -1,0 +1,119 @@
+"""Compare two runs of the same sweep, site by site: did a change park more, faster?
+
+    python scripts/sweep_diff.py BEFORE.parquet AFTER.parquet [--all]
+
+Both files are ``results.parquet`` of ``swarmpark sweep`` (or the committed
+``sweeps/results/*.parquet``). Runs are matched on the site (``kind`` and ``seed`` of a
+generated site, ``source`` of a scenario file) and the sweep's parameters (``param.*``
+columns), so a sweep run on a subset of the other's sites compares on the sites they share.
+Printed: runs fully parked, skids parked, contacts and deadlock episodes on either side; the
+geometric mean of time to park (after / before) over the runs parked both ways; and the runs
+whose skids parked or time to park changed (``--all``: every run). Exits with status 2 if a
+file is missing or not a sweep's results, or the two share no site.
+
+This is how each "Tried and left out" entry of docs/navigation.md was judged (there against
+main's run of the same sites; large runs are chaotic, so one site moving says little).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+#: Columns every sweep's results carry.
+NEEDED = ("success", "n_robots", "n_parked", "time_to_park_s", "n_collisions", "n_deadlocks")
+
+
+def keys(frame: pd.DataFrame) -> list[str]:
+    """The columns that name a run: its site and the sweep's parameters."""
+    site = ["kind", "seed"] if "kind" in frame.columns else []
+    if "source" in frame.columns and not site:
+        site = ["source"]
+    return site + sorted(c for c in frame.columns if c.startswith("param."))
+
+
+def diff(before: pd.DataFrame, after: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
+    """``(summary, runs)``: the two sides' totals on the runs they share, and one row per
+    shared run with both sides' skids parked and time to park (``changed``: either
+    differs). Raises ValueError naming what is wrong."""
+    for name, frame in (("before", before), ("after", after)):
+        missing = [c for c in NEEDED if c not in frame.columns]
+        if missing:
+            raise ValueError(f"{name}: not a sweep's results (no column {', '.join(missing)})")
+    on = [k for k in keys(before) if k in after.columns]
+    if not on:
+        raise ValueError("before, after: no column names a site in both")
+    m = before.merge(after, on=on, suffixes=("_before", "_after"))
+    if m.empty:
+        raise ValueError(f"before, after: no site in common (matched on {', '.join(on)})")
+    both = m[m.success_before.astype(bool) & m.success_after.astype(bool)]
+    ratio = both.time_to_park_s_after / both.time_to_park_s_before
+    summary = {
+        "runs": len(m),
+        "skids": int(m.n_robots_before.sum()),
+        **{
+            f"{what}_{side}": int(m[f"{col}_{side}"].sum())
+            for what, col in (
+                ("parked_runs", "success"),
+                ("parked_skids", "n_parked"),
+                ("contacts", "n_collisions"),
+                ("deadlocks", "n_deadlocks"),
+            )
+            for side in ("before", "after")
+        },
+        "parked_both": len(both),
+        "time_ratio": float(np.exp(np.log(ratio).mean())) if len(both) else None,
+    }
+    runs = m[on].copy()
+    runs["skids"] = m.n_robots_before
+    for side in ("before", "after"):
+        runs[f"parked_{side}"] = m[f"n_parked_{side}"]
+        runs[f"time_{side}"] = m[f"time_to_park_s_{side}"]
+    same_time = np.isclose(runs.time_before, runs.time_after) | (
+        runs.time_before.isna() & runs.time_after.isna()
+    )
+    runs["changed"] = (runs.parked_before != runs.parked_after) | ~same_time
+    return summary, runs
+
+
+def main(argv: list[str]) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("before", type=Path)
+    ap.add_argument("after", type=Path)
+    ap.add_argument("--all", action="store_true", help="list every run, not only those changed")
+    a = ap.parse_args(argv)
+    frames = []
+    for name in ("before", "after"):
+        path = getattr(a, name)
+        if not path.is_file():
+            ap.error(f"{name}: no such file ({path})")
+        try:
+            frames.append(pd.read_parquet(path))
+        except Exception as exc:  # pyarrow raises several kinds for a file that is not Parquet
+            ap.error(f"{name}: not a Parquet file ({path}: {exc})")
+    try:
+        s, runs = diff(*frames)
+    except ValueError as exc:
+        ap.error(str(exc))
+    print(f"{s['runs']} runs in common, {s['skids']} skids")
+    print(f"runs fully parked: {s['parked_runs_before']} before, {s['parked_runs_after']} after")
+    print(f"skids parked:      {s['parked_skids_before']} before, {s['parked_skids_after']} after")
+    print(f"contacts:          {s['contacts_before']} before, {s['contacts_after']} after")
+    print(f"deadlock episodes: {s['deadlocks_before']} before, {s['deadlocks_after']} after")
+    if s["time_ratio"] is not None:
+        print(
+            f"time to park, the {s['parked_both']} runs parked both ways: "
+            f"after / before {s['time_ratio']:.3f} (geometric mean)"
+        )
+    shown = runs if a.all else runs[runs.changed]
+    print(f"\n{int(runs.changed.sum())} of {len(runs)} runs changed")
+    if len(shown):
+        print(shown.drop(columns="changed").to_string(index=False))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

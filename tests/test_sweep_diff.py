@@ -1,0 +1,64 @@
+"""scripts/sweep_diff.py: two runs of a sweep compared site by site."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from helpers import load_script
+
+diff_mod = load_script("sweep_diff")
+
+
+def _runs(parked, times, deadlocks=(0, 0, 0)):
+    return pd.DataFrame(
+        {
+            "kind": ["door", "door", "hangar"],
+            "seed": [1000, 1001, 1000],
+            "param.perturb.draw": [1, 1, 1],
+            "n_robots": [4, 10, 6],
+            "n_parked": parked,
+            "success": [p == n for p, n in zip(parked, (4, 10, 6), strict=True)],
+            "time_to_park_s": times,
+            "n_collisions": [0, 0, 0],
+            "n_deadlocks": list(deadlocks),
+        }
+    )
+
+
+def test_the_diff_counts_both_sides_on_the_runs_they_share():
+    before = _runs([4, 8, 6], [40.0, np.nan, 60.0], deadlocks=(1, 5, 0))
+    after = _runs([4, 10, 6], [40.0, 90.0, 45.0], deadlocks=(1, 2, 0)).iloc[[1, 2, 0]]
+    s, runs = diff_mod.diff(before, after)
+    assert s["runs"] == 3 and s["skids"] == 20
+    assert (s["parked_runs_before"], s["parked_runs_after"]) == (2, 3)
+    assert (s["parked_skids_before"], s["parked_skids_after"]) == (18, 20)
+    assert (s["deadlocks_before"], s["deadlocks_after"]) == (6, 3)
+    # Parked both ways: the 4-skid door (same time) and the hangar (0.75): geometric mean.
+    assert s["parked_both"] == 2
+    assert s["time_ratio"] == pytest.approx(np.sqrt(0.75))
+    changed = runs[runs.changed]
+    assert sorted(zip(changed.kind, changed.seed, strict=True)) == [
+        ("door", 1001),
+        ("hangar", 1000),
+    ]
+    # A sweep run on part of the other's sites compares on those.
+    s, _ = diff_mod.diff(before, after.iloc[:1])
+    assert s["runs"] == 1
+
+
+def test_the_diff_refuses_what_is_not_a_pair_of_sweep_results(tmp_path, capsys):
+    runs = _runs([4, 10, 6], [40.0, 90.0, 45.0])
+    with pytest.raises(ValueError, match="before: not a sweep's results .*n_parked"):
+        diff_mod.diff(runs.drop(columns="n_parked"), runs)
+    other = runs.assign(seed=runs.seed + 4000)
+    with pytest.raises(ValueError, match="no site in common"):
+        diff_mod.diff(runs, other)
+    path = tmp_path / "a.parquet"
+    runs.to_parquet(path)
+    with pytest.raises(SystemExit) as exc:
+        diff_mod.main([str(path), str(tmp_path / "missing.parquet")])
+    assert exc.value.code == 2
+    assert "after: no such file" in capsys.readouterr().err
+    diff_mod.main([str(path), str(path)])
+    assert "0 of 3 runs changed" in capsys.readouterr().out
