@@ -3,13 +3,14 @@
     python scripts/sweep_diff.py BEFORE.parquet AFTER.parquet [--all]
 
 Both files are ``results.parquet`` of ``swarmpark sweep`` (or the committed
-``sweeps/results/*.parquet``). Runs are matched on the site (``kind`` and ``seed`` of a
-generated site, ``source`` of a scenario file) and the sweep's parameters (``param.*``
-columns), so a sweep run on a subset of the other's sites compares on the sites they share.
-Printed: runs fully parked, skids parked, contacts and deadlock episodes on either side; the
-geometric mean of time to park (after / before) over the runs parked both ways; and the runs
-whose skids parked or time to park changed (``--all``: every run). Exits with status 2 if a
-file is missing or not a sweep's results, or the two share no site.
+``sweeps/results/*.parquet``). Runs are matched on the site (``kind``: the generated kind
+or the scenario's name; ``seed``) and the sweep's parameters (``param.*`` columns, which
+must be the same on both sides), so a sweep run on a subset of the other's sites compares
+on the sites they share. Printed: runs fully parked, skids parked, contacts and deadlock
+episodes on either side; the geometric mean of time to park (after / before) over the runs
+parked both ways; and the runs whose skids parked or time to park changed (``--all``: every
+run). Exits with status 2 if a file is missing or not a sweep's results, the two sweep
+different parameters, or they share no site.
 
 This is how each "Tried and left out" entry of docs/navigation.md was judged (there against
 main's run of the same sites; large runs are chaotic, so one site moving says little).
@@ -25,15 +26,22 @@ import numpy as np
 import pandas as pd
 
 #: Columns every sweep's results carry.
-NEEDED = ("success", "n_robots", "n_parked", "time_to_park_s", "n_collisions", "n_deadlocks")
+NEEDED = (
+    "kind",
+    "seed",
+    "success",
+    "n_robots",
+    "n_parked",
+    "time_to_park_s",
+    "n_collisions",
+    "n_deadlocks",
+)
 
 
 def keys(frame: pd.DataFrame) -> list[str]:
-    """The columns that name a run: its site and the sweep's parameters."""
-    site = ["kind", "seed"] if "kind" in frame.columns else []
-    if "source" in frame.columns and not site:
-        site = ["source"]
-    return site + sorted(c for c in frame.columns if c.startswith("param."))
+    """The columns that name a run: its site (``kind``: the generated kind or the scenario's
+    name; ``seed``) and the sweep's parameters."""
+    return ["kind", "seed"] + sorted(c for c in frame.columns if c.startswith("param."))
 
 
 def diff(before: pd.DataFrame, after: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
@@ -44,9 +52,10 @@ def diff(before: pd.DataFrame, after: pd.DataFrame) -> tuple[dict, pd.DataFrame]
         missing = [c for c in NEEDED if c not in frame.columns]
         if missing:
             raise ValueError(f"{name}: not a sweep's results (no column {', '.join(missing)})")
-    on = [k for k in keys(before) if k in after.columns]
-    if not on:
-        raise ValueError("before, after: no column names a site in both")
+    on = keys(before)
+    if on != keys(after):
+        only = sorted(set(on) ^ set(keys(after)))
+        raise ValueError(f"before, after: not the same parameters ({', '.join(only)} on one side)")
     m = before.merge(after, on=on, suffixes=("_before", "_after"))
     if m.empty:
         raise ValueError(f"before, after: no site in common (matched on {', '.join(on)})")

@@ -51,6 +51,8 @@ def test_the_diff_refuses_what_is_not_a_pair_of_sweep_results(tmp_path, capsys):
     runs = _runs([4, 10, 6], [40.0, 90.0, 45.0])
     with pytest.raises(ValueError, match="before: not a sweep's results .*n_parked"):
         diff_mod.diff(runs.drop(columns="n_parked"), runs)
+    with pytest.raises(ValueError, match=r"not the same parameters \(param.perturb.draw on"):
+        diff_mod.diff(runs, runs.drop(columns="param.perturb.draw"))
     other = runs.assign(seed=runs.seed + 4000)
     with pytest.raises(ValueError, match="no site in common"):
         diff_mod.diff(runs, other)
