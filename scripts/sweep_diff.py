@@ -52,9 +52,9 @@ def diff(before: pd.DataFrame, after: pd.DataFrame) -> tuple[dict, pd.DataFrame]
         missing = [c for c in NEEDED if c not in frame.columns]
         if missing:
             raise ValueError(f"{name}: not a sweep's results (no column {', '.join(missing)})")
-    on = keys(before)
-    if on != keys(after):
-        only = sorted(set(on) ^ set(keys(after)))
+    on, on_after = keys(before), keys(after)
+    if on != on_after:
+        only = sorted(set(on) ^ set(on_after))
         raise ValueError(f"before, after: not the same parameters ({', '.join(only)} on one side)")
     m = before.merge(after, on=on, suffixes=("_before", "_after"))
     if m.empty:
