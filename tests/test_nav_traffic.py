@@ -170,3 +170,27 @@ def test_points_judged_far_from_every_zone_find_no_zone_ahead():
             assert got == (0, 0.0, 0)
         seen += got[0] != 0
     assert seen > 10  # paths from the points near the door do reach it
+
+
+def test_a_path_that_only_cuts_the_zones_edge_asks_for_no_grant():
+    """Skid 1 in the east room backs out past the door's zone and comes back into the east
+    room (going round a row): it does not go through the door, so it is not queued behind
+    skid 0, which holds the door (queued, it stood in skid 0's way while skid 0 waited for
+    it, for the rest of a generated door run). A path into the same zone that goes on west
+    through the door still asks."""
+    view, paths = _setup([[2.4, 3.0, 0.0], [8.4, 3.0, 0.0]], [[9.0, 3.0, 0.0], [8.8, 0.8, 0.0]])
+    tc = TrafficControl(TrafficParams(convoy_gap_s=0.0))
+    tc.prepare(view)
+    z = tc.zones
+    edge = z.polygons[0].bounds[2] - 0.2  # inside the zone's east padding, east of the door
+    assert edge > 5.15 and z.zone_at(np.array([[edge, 3.0]]))[0] == 1
+    paths[1].path = np.array([[8.4, 3.0], [edge, 3.0], [edge, 0.8], [8.8, 0.8]])
+    states = [TrafficState(), TrafficState()]
+    fol = PathFollower(FollowerParams())
+    waiting = tc.step(view, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool))
+    assert states[0].zone == 1
+    assert states[1].zone == 0 and states[1].waiting == 0 and not waiting[1]
+    # Through the door to the west room: it asks, and waits for skid 0 coming the other way.
+    paths[1].path = np.array([[8.4, 3.0], [edge, 3.0], [1.0, 3.0]])
+    waiting = tc.step(view, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool))
+    assert states[1].waiting == 1 and waiting[1]

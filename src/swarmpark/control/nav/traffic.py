@@ -11,7 +11,9 @@ with a grant:
 
 - a skid whose path enters a zone within ``lookahead_m`` asks for it, from the region it comes
   from (standing in the zone: the one its path leads away from); the askers are queued
-  by their path distance to the zone (first come, first served; ties by index);
+  by their path distance to the zone (first come, first served; ties by index); a path
+  that only cuts the zone's padding, leaving it into the region it came from, does not go
+  through and asks for nothing;
 - a grant goes to the head of the queue when the zone is empty, or when every skid holding
   a grant came from the same side (a convoy) and the last one was granted ``convoy_gap_s``
   ago (counted from its grant: counted from when it entered, a 10-skid door site took 134 s
@@ -247,13 +249,42 @@ class TrafficControl:
         hit = np.flatnonzero(zones)
         if not len(hit):
             return 0, 0.0, 0
+        regions = z.region_at(pts)
         first = hit[0]
-        before = z.region_at(pts[: first + 1])
-        if np.any(before > 0):
+        while True:
+            zone = int(zones[first])
+            before = regions[: first + 1]
+            if not np.any(before > 0):
+                return zone, float(s[first] - s_here), self._side_inside(st, zone, z)
             side = int(before[before > 0][-1])
-        else:
-            side = self._side_inside(st, int(zones[first]), z)
-        return int(zones[first]), float(s[first] - s_here), side
+            if not self._comes_back(st, cum, s[first], zone, side, z):
+                return zone, float(s[first] - s_here), side
+            # Into the zone's edge and out again on the side it came from: not through it.
+            after = np.flatnonzero((np.arange(len(s)) > first) & (zones != zone))
+            later = hit[hit > (after[0] if len(after) else len(s))]
+            if not len(later):
+                return 0, 0.0, 0
+            first = later[0]
+
+    @staticmethod
+    def _comes_back(
+        st: PathState, cum: np.ndarray, s0: float, zone: int, side: int, z: Bottlenecks
+    ) -> bool:
+        """Whether a path entering ``zone`` at arc length ``s0`` from region ``side`` leaves
+        it back into ``side`` (not into another region, and it does not end in the zone).
+        Such a path does not go through the bottleneck: it only cuts the zone's padding (a
+        skid in a bay beside a door backing out of a row to go round it; queued for the
+        door, it stood in the way of the skid holding the door's grant, which waited for it,
+        for the rest of a generated door run)."""
+        s = np.arange(s0, cum[-1] + z.resolution_m, z.resolution_m)
+        s[-1] = min(s[-1], cum[-1])
+        pts = np.column_stack([np.interp(s, cum, st.path[:, 0]), np.interp(s, cum, st.path[:, 1])])
+        out = np.flatnonzero(z.zone_at(pts) != zone)
+        if not len(out):
+            return False
+        region = z.region_at(pts[out[0] :])
+        region = region[region > 0]
+        return bool(len(region)) and int(region[0]) == side
 
     def _side_inside(self, st: PathState, zone: int, z: Bottlenecks) -> int:
         """The side a skid standing inside ``zone`` comes from: of the two regions the zone
