@@ -44,6 +44,11 @@ from swarmpark.plan.bottlenecks import Bottlenecks, find_bottlenecks
 __all__ = ["TrafficControl", "TrafficState", "zones_for"]
 
 
+def _along(st: PathState, cum: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Points ``(K, 2)`` of path ``st`` at arc lengths ``s`` (``cum``: its arc lengths)."""
+    return np.column_stack([np.interp(s, cum, st.path[:, 0]), np.interp(s, cum, st.path[:, 1])])
+
+
 def zones_for(grid, footprints, p: TrafficParams) -> Bottlenecks:
     """The zones of ``grid`` for a fleet of ``footprints``: passages wide enough for the
     widest skid but narrower than two side by side plus ``p.lane_clearance_m``, grown by half
@@ -244,7 +249,7 @@ class TrafficControl:
         s = np.arange(s_here, min(s_here + self.params.lookahead_m, cum[-1]), z.resolution_m)
         if not len(s):
             return 0, 0.0, 0
-        pts = np.column_stack([np.interp(s, cum, st.path[:, 0]), np.interp(s, cum, st.path[:, 1])])
+        pts = _along(st, cum, s)
         zones = z.zone_at(pts)
         hit = np.flatnonzero(zones)
         if not len(hit):
@@ -261,7 +266,7 @@ class TrafficControl:
                 return zone, float(s[first] - s_here), side
             # Into the zone's edge and out again on the side it came from: not through it.
             after = np.flatnonzero((np.arange(len(s)) > first) & (zones != zone))
-            later = hit[hit > (after[0] if len(after) else len(s))]
+            later = hit[hit >= (after[0] if len(after) else len(s))]
             if not len(later):
                 return 0, 0.0, 0
             first = later[0]
@@ -278,7 +283,7 @@ class TrafficControl:
         for the rest of a generated door run)."""
         s = np.arange(s0, cum[-1] + z.resolution_m, z.resolution_m)
         s[-1] = min(s[-1], cum[-1])
-        pts = np.column_stack([np.interp(s, cum, st.path[:, 0]), np.interp(s, cum, st.path[:, 1])])
+        pts = _along(st, cum, s)
         out = np.flatnonzero(z.zone_at(pts) != zone)
         if not len(out):
             return False
