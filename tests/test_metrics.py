@@ -142,6 +142,41 @@ def test_a_held_skid_is_waiting_only_at_its_stop(monkeypatch, at_hold, reported)
         )
 
 
+class _Queued(Scripted):
+    """Both skids stand still; skid b is queued at a door whose grant skid a holds (as the
+    navigator's ``queued`` and ``queue_holders`` say; ``holders`` False: no such method)."""
+
+    def __init__(self, holders: bool):
+        super().__init__(lambda t: [[0.0, 0.0], [0.0, 0.0]])
+        self.queued = np.array([False, True])
+        if holders:
+            self.queue_holders = lambda i: [0] if i == 1 else []
+
+    def explain(self, i):
+        return ("queued", [0]) if i == 1 else ("stuck", [])
+
+
+@pytest.mark.parametrize("holders", [True, False])
+def test_a_queue_behind_a_stuck_holder_is_reported_as_deadlocked(holders):
+    """A skid queued at a bottleneck waits on purpose, unless every skid holding the zone is
+    in a deadlock episode itself: then it is reported too, from when they were, with the
+    controller's cause. A controller that does not name the holders has its queues waiting."""
+    world = make_world(
+        duration_s=25,
+        robots=[{"id": "a", "pose": [2.0, 3.0, 0.0]}, {"id": "b", "pose": [2.0, 1.5, 0.0]}],
+        commands=[
+            {"at_s": 0, "goto": {"robot": "a", "pose": [7.0, 3.0, 0.0]}},
+            {"at_s": 0, "goto": {"robot": "b", "pose": [7.0, 1.5, 0.0]}},
+        ],
+    )
+    dls = run_world(world, controller=_Queued(holders)).result["deadlocks"]
+    assert [d["robot"] for d in dls] == (["a", "b"] if holders else ["a"])
+    assert dls[0]["cause"] == "stuck"
+    if holders:  # b's clock started when a's episode was reported
+        assert dls[1]["cause"] == "queued: a"
+        assert dls[1]["start_s"] == pytest.approx(dls[0]["start_s"] + 10.0, abs=0.2)
+
+
 def test_lower_bound_goes_around_a_wall():
     world = make_world(
         map={

@@ -175,3 +175,22 @@ def test_a_held_skid_whose_stop_moves_on_drives_on_to_it():
     assert view.poses[0, 0] > x_stop + 1.5 and nav.at_hold[0]
     front = shapely.Polygon(footprint_corners(view.poses[:1], FOOTPRINT.corners_body()[None])[0])
     assert HoldParams().gap_m <= front.distance(spot) <= HoldParams().gap_m + 0.3
+
+
+def test_a_queued_skid_names_the_skids_holding_its_zone():
+    """For the deadlock report: a skid queued at a bottleneck names the skids holding that
+    zone's grant (not those of another zone), and says it is queued behind them."""
+    from swarmpark.control.nav.navigator import RobotNav
+
+    nav = Navigator()
+    nav.robots = [RobotNav() for _ in range(4)]
+    nav.robots[0].traffic.zone = 1  # holds zone 1
+    nav.robots[1].traffic.waiting = 1  # queued for zone 1
+    nav.robots[2].traffic.zone = 2  # holds another zone
+    nav.robots[3].traffic.zone = 1  # holds zone 1 too (a convoy)
+    nav.queued = np.array([False, True, False, False])
+    assert nav.queue_holders(1) == [0, 3]
+    assert nav.queue_holders(0) == [] and nav.queue_holders(2) == []
+    assert nav.explain(1) == ("queued at a bottleneck held by skids that make no progress", [0, 3])
+    nav.queued[1] = False  # its turn came
+    assert nav.queue_holders(1) == []

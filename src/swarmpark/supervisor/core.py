@@ -446,10 +446,12 @@ class Supervisor(CommandsMixin):
         # Waiting on purpose (stopped, held back by the fill order) is not a deadlock.
         hold = self._waiting_held(view.hold)
         paused = self.stopped | self.teleop | self.estopped | hold | self.health.faulted
-        for name in ("making_room", "queued"):  # standing aside (RVO), queued at a door
-            aside = self._per_robot(name)
-            if aside is not None:
-                paused = paused | aside
+        aside = self._per_robot("making_room")  # standing aside (RVO)
+        if aside is not None:
+            paused = paused | aside
+        queued = self._per_robot("queued")  # queued at a door
+        if queued is not None:
+            paused = paused | self._queue_paused(queued)
         self.metrics.on_step(
             self.t,
             self.truth_poses(),
@@ -460,6 +462,24 @@ class Supervisor(CommandsMixin):
             self._per_robot("activity"),
         )
         return step
+
+    def _queue_paused(self, queued: np.ndarray) -> np.ndarray:
+        """Of the skids ``queued`` at a bottleneck, those waiting on purpose: all, except
+        those whose zone is held only by skids in a deadlock episode (the controller's
+        ``queue_holders``). Such a queue waits for nothing that will come, so it is reported
+        as deadlocked as well, with its holders as the cause (on a generated door, a skid
+        queued for the door stood still for 60 s behind a holder that waited for it, and only
+        the holder's episode told)."""
+        holders = getattr(self.controller, "queue_holders", None)
+        if holders is None:
+            return queued
+        stuck = self.metrics.stuck()
+        out = queued.copy()
+        for i in np.flatnonzero(queued).tolist():
+            them = holders(i)
+            if them and stuck[them].all():
+                out[i] = False
+        return out
 
     def _waiting_held(self, held: np.ndarray) -> np.ndarray:
         """Of the skids ``held`` back by the fill order, those waiting on purpose: a held

@@ -319,6 +319,9 @@ class Navigator:
         person = self._person_at_spot(i)
         if person:
             return person, []
+        holders = self.queue_holders(i)
+        if holders:
+            return "queued at a bottleneck held by skids that make no progress", holders
         if r.manoeuvre.running():
             return "manoeuvring towards its goal", []
         if r.manoeuvre.walled:
@@ -333,6 +336,14 @@ class Navigator:
         if self.making_room is not None and i < len(self.making_room) and self.making_room[i]:
             return "making room for another skid", []
         return "moving without progress (a local minimum of the potential field)", []
+
+    def queue_holders(self, i: int) -> list[int]:
+        """The skids holding the grant for the bottleneck zone skid ``i`` is queued at (empty
+        if it is not queued), as of the last tick."""
+        if i >= len(self.queued) or not self.queued[i]:
+            return []
+        zone = self.robots[i].traffic.waiting
+        return [j for j, r in enumerate(self.robots) if j != i and zone and r.traffic.zone == zone]
 
     def _person_at_spot(self, i: int) -> str:
         """A person standing within the berth skids keep from standing people (the
