@@ -468,8 +468,8 @@ class Supervisor(CommandsMixin):
         those whose zone is held only by skids in a deadlock episode (the controller's
         ``queue_holders``). Such a queue waits for nothing that will come, so it is reported
         as deadlocked as well, with its holders as the cause (on a generated door, a skid
-        queued for the door stood still for 60 s behind a holder that waited for it, and only
-        the holder's episode told)."""
+        queued for the door stood still from 124 s to the end of the run in front of the
+        holder, which waited for it, and only the holder's episode told)."""
         holders = getattr(self.controller, "queue_holders", None)
         if holders is None:
             return queued
