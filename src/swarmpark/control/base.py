@@ -39,6 +39,7 @@ class ControlView:
     goal_changed: np.ndarray  # (N,) bool: the goal was set or changed this tick
     hold: np.ndarray | None = None  # (N,) bool: wait outside hold_zones[i] (fill order)
     hold_zones: tuple = ()  # per robot: shapely Polygon (its parking boundary) or None
+    hold_outside: np.ndarray | None = None  # (N,) bool: of hold, those outside a boundary
     stopped: np.ndarray | None = None  # (N,) bool: stopped, e-stopped or teleop (immobile)
     max_yaw_accel: np.ndarray | None = None  # (N,) rad/s^2; None: turns change at once
 

@@ -379,6 +379,7 @@ class Supervisor(CommandsMixin):
             # A lost robot is an immobile obstacle at its last known pose.
             stopped=self.stopped | self.teleop | self.estopped | self.health.faulted,
             hold_zones=tuple(self.hold_zones(short)),
+            hold_outside=outside & ~short,
         )
 
     def _commands(self, view: ControlView) -> np.ndarray:

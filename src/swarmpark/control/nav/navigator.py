@@ -467,6 +467,11 @@ class Navigator:
         )
         speed, aside = room.speed, room.aside
         if p.make_room.for_waiting:
+            # A skid held outside its boundary that cannot reach its stop stands in the
+            # queue for it: it makes room as a waiting skid does.
+            if view.hold_outside is not None:
+                stuck = np.array([r.stall.stalled_s >= p.hold.stuck_s for r in self.robots])
+                waiting = waiting | (view.hold_outside & stuck[: len(waiting)])
             wait = self.make_room.step_waiting(
                 view,
                 waiting,
