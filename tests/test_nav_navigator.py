@@ -194,3 +194,36 @@ def test_a_queued_skid_names_the_skids_holding_its_zone():
     assert nav.explain(1) == ("queued at a bottleneck held by skids that make no progress", [0, 3])
     nav.queued[1] = False  # its turn came
     assert nav.queue_holders(1) == []
+
+
+@pytest.mark.parametrize("outside", [True, False])
+def test_a_skid_held_outside_and_kept_still_on_its_way_waits_where_it_stands(outside):
+    # Skid 0 is held outside a boundary 5 m ahead, not yet at its stop, and has been kept
+    # still for hold.stuck_s: it is queued behind the skids held before it, so it waits where
+    # it stands (its stall clock stops, no back-up) and, waiting, makes room for skid 1,
+    # which drives down across it. Held short of its own spot instead (following a skid
+    # bound deeper, perhaps the one the others wait for), it is still on its way.
+    nav = Navigator()
+    zone = box(8.5, 2.0, 10.0, 4.0)
+    view = make_view(
+        [[3.0, 3.0, 0.0], [3.0, 5.3, -np.pi / 2]],
+        [[9.2, 3.0, 0.0], [3.0, 0.8, -np.pi / 2]],
+        goal_changed=[True, True],
+        dt=0.05,
+    )
+    view = replace(
+        view,
+        hold=np.array([True, False]),
+        hold_zones=(zone, None),
+        hold_outside=np.array([outside, False]),
+    )
+    nav.compute(view)
+    assert not nav.at_hold[0]
+    nav.robots[0].stall.stalled_s = HoldParams().stuck_s
+    view = replace(view, goal_changed=np.zeros(2, bool))
+    nav.compute(view)
+    assert nav.at_hold[0] == outside
+    cmd = nav.compute(view)  # waiting from the last tick on: it makes room
+    assert nav.at_hold[0] == outside and nav.making_room[0] == outside
+    if outside:
+        assert abs(cmd[0, 0]) > 0.0 and cmd[0, 1] == 0.0

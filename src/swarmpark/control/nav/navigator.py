@@ -440,6 +440,12 @@ class Navigator:
         zones += [None] * (n - len(zones))
         reached = np.zeros(n, dtype=bool)
         reached[idx[at_stop]] = True
+        if view.hold_outside is not None:
+            # Held outside and kept still on its way to its stop: it stands in the queue for
+            # its boundary, behind the skids held before it, and waits where it stands.
+            after = self.params.hold.stuck_s
+            stuck = np.array([self.robots[i].stall.stalled_s >= after for i in idx.tolist()])
+            reached[idx[stuck & view.hold_outside[idx]]] = True
         if len(self.at_hold) == n:
             same = np.array([a == b for a, b in zip(self._held_at, zones, strict=True)], bool)
             reached |= self.at_hold & same
@@ -467,11 +473,6 @@ class Navigator:
         )
         speed, aside = room.speed, room.aside
         if p.make_room.for_waiting:
-            # A skid held outside its boundary that cannot reach its stop stands in the
-            # queue for it: it makes room as a waiting skid does.
-            if view.hold_outside is not None:
-                stuck = np.array([r.stall.stalled_s >= p.hold.stuck_s for r in self.robots])
-                waiting = waiting | (view.hold_outside & stuck[: len(waiting)])
             wait = self.make_room.step_waiting(
                 view,
                 waiting,

@@ -655,8 +655,9 @@ class HoldParams:
     #: Their command is checked this far ahead in time.
     lookahead_s: float = 0.5
     #: A skid held outside that the monitor or the field has kept still this long on its way
-    #: to its stop makes room as a waiting skid (it stands in the queue for its boundary).
-    stuck_s: float = 2.0
+    #: to its stop waits where it stands (it is queued behind the skids held before it);
+    #: below the back-up's ``stall.time_s``, which would start first.
+    stuck_s: float = 1.0
 
     def __post_init__(self) -> None:
         _check(self, {"gap_m": ">=0", "lookahead_s": ">0", "stuck_s": ">0"})
