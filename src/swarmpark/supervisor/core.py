@@ -379,7 +379,7 @@ class Supervisor(CommandsMixin):
             # A lost robot is an immobile obstacle at its last known pose.
             stopped=self.stopped | self.teleop | self.estopped | self.health.faulted,
             hold_zones=tuple(self.hold_zones(short)),
-            hold_outside=outside & ~short,
+            hold_outside=outside,  # fill_order.holds: outside and short never overlap
         )
 
     def _commands(self, view: ControlView) -> np.ndarray:
@@ -475,6 +475,8 @@ class Supervisor(CommandsMixin):
         if holders is None:
             return queued
         stuck = self.metrics.stuck()
+        if not stuck.any():
+            return queued
         out = queued.copy()
         for i in np.flatnonzero(queued).tolist():
             them = holders(i)

@@ -444,8 +444,8 @@ class Navigator:
             # Held outside and kept still on its way to its stop: it stands in the queue for
             # its boundary, behind the skids held before it, and waits where it stands.
             after = self.params.hold.stuck_s
-            stuck = np.array([self.robots[i].stall.stalled_s >= after for i in idx.tolist()])
-            reached[idx[stuck & view.hold_outside[idx]]] = True
+            out = idx[view.hold_outside[idx]].tolist()
+            reached[[i for i in out if self.robots[i].stall.stalled_s >= after]] = True
         if len(self.at_hold) == n:
             same = np.array([a == b for a, b in zip(self._held_at, zones, strict=True)], bool)
             reached |= self.at_hold & same
