@@ -644,7 +644,11 @@ class CommandsMixin:
     def _hand_over(self) -> None:
         """Swap the goals of a skid waiting outside for a deeper one and the skid it waits
         for, when it stands nearer that deeper goal (:func:`.fill_order.hand_over`), unless
-        the swap costs more than the re-assignment's hysteresis (which would undo it)."""
+        the swap costs more than the re-assignment's hysteresis above the unconstrained
+        optimum. That is stricter than the re-assignment, which keeps parked skids on their
+        goals and never takes a docking skid's, and would keep some swaps this refuses:
+        checking with the re-assignment itself was tried and left out (docs/navigation.md,
+        session 47)."""
         for g in self.groups:
             if g.cost == "sequential" or (g.reach is None and not any(g.blocks)):
                 continue
@@ -659,7 +663,7 @@ class CommandsMixin:
             new = g.goal_of.copy()
             new[a], new[b] = g.goal_of[b], g.goal_of[a]
             if g.cost != "path":
-                # Kept only if the re-assignment would not undo it (its hysteresis).
+                # Kept only within the hysteresis of the unconstrained optimum.
                 cost = self._cost_matrix(g.robots, g.goals, g.cost, fit)
                 rows = np.arange(len(new))
                 now = cost[rows, new].sum()
