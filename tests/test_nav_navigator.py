@@ -227,3 +227,27 @@ def test_a_skid_held_outside_and_kept_still_on_its_way_waits_where_it_stands(out
     assert nav.at_hold[0] == outside and nav.making_room[0] == outside
     if outside:
         assert abs(cmd[0, 0]) > 0.0 and cmd[0, 1] == 0.0
+
+
+def test_a_skid_held_outside_but_standing_in_its_boundary_does_not_wait_there():
+    # Held outside, and kept still for hold.stuck_s, but with its front already in its
+    # boundary (in the door of an elevator's car, say): it is not in the queue for the
+    # boundary but in the way of the skids bound deeper, so it does not wait where it stands.
+    # (Traced on a 10-skid training car: a skid kept still so in the car's door waited there,
+    # queued, for a skid bound deeper that stood behind it.)
+    nav = Navigator()
+    zone = box(3.4, 2.0, 10.0, 4.0)
+    view = make_view([[3.0, 3.0, 0.0]], [[9.2, 3.0, 0.0]], goal_changed=[True], dt=0.05)
+    view = replace(view, hold=np.array([True]), hold_zones=(zone,), hold_outside=np.array([True]))
+    nav.compute(view)
+    nav.robots[0].stall.stalled_s = HoldParams().stuck_s
+    view = replace(view, goal_changed=np.zeros(1, bool))
+    nav.compute(view)
+    assert not nav.at_hold[0]
+    # The same skid 0.2 m short of the boundary waits where it stands.
+    nav = Navigator()
+    view = replace(view, poses=np.array([[2.6, 3.0, 0.0]]), goal_changed=np.ones(1, bool))
+    nav.compute(view)
+    nav.robots[0].stall.stalled_s = HoldParams().stuck_s
+    nav.compute(replace(view, goal_changed=np.zeros(1, bool)))
+    assert nav.at_hold[0]

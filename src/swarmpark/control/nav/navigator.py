@@ -443,8 +443,9 @@ class Navigator:
         if view.hold_outside is not None:
             # Held outside and kept still on its way to its stop: it stands in the queue for
             # its boundary, behind the skids held before it, and waits where it stands.
+            # Not one that stands in the boundary already (in its door, in everyone's way).
             after = self.params.hold.stuck_s
-            out = idx[view.hold_outside[idx]].tolist()
+            out = idx[view.hold_outside[idx] & held].tolist()
             reached[[i for i in out if self.robots[i].stall.stalled_s >= after]] = True
         if len(self.at_hold) == n:
             same = np.array([a == b for a, b in zip(self._held_at, zones, strict=True)], bool)
