@@ -4,13 +4,13 @@
 
 Both files are ``results.parquet`` of ``swarmpark sweep`` (or the committed
 ``sweeps/results/*.parquet``). Runs are matched on the site (``kind``: the generated kind
-or the scenario's name; ``seed``) and the sweep's parameters (``param.*`` columns, which
-must be the same on both sides), so a sweep run on a subset of the other's sites compares
-on the sites they share. Printed: runs fully parked, skids parked, contacts and deadlock
-episodes on either side; the geometric mean of time to park (after / before) over the runs
-parked both ways; and the runs whose skids parked or time to park changed (``--all``: every
-run). Exits with status 2 if a file is missing or not a sweep's results, the two sweep
-different parameters, or they share no site.
+or the scenario's name; ``seed``; the fleet size asked for) and the sweep's parameters
+(``param.*`` columns, which must be the same on both sides), so a sweep run on a subset of
+the other's sites compares on the sites they share. Printed: runs fully parked, skids
+parked, contacts and deadlock episodes on either side; the geometric mean of time to park
+(after / before) over the runs parked both ways; and the runs whose skids parked or time to
+park changed (``--all``: every run). Exits with status 2 if a file is missing or not a
+sweep's results, the two sweep different parameters, or they share no site.
 
 This is how each "Tried and left out" entry of docs/navigation.md was judged (there against
 main's run of the same sites; large runs are chaotic, so one site moving says little).
@@ -40,8 +40,10 @@ NEEDED = (
 
 def keys(frame: pd.DataFrame) -> list[str]:
     """The columns that name a run: its site (``kind``: the generated kind or the scenario's
-    name; ``seed``) and the sweep's parameters."""
-    return ["kind", "seed"] + sorted(c for c in frame.columns if c.startswith("param."))
+    name; ``seed``; ``robots_asked``, the fleet size a sweep asked the generator for, where
+    the results have it: one seed makes a site of each size) and the sweep's parameters."""
+    site = ["kind", "seed"] + (["robots_asked"] if "robots_asked" in frame.columns else [])
+    return site + sorted(c for c in frame.columns if c.startswith("param."))
 
 
 def diff(before: pd.DataFrame, after: pd.DataFrame) -> tuple[dict, pd.DataFrame]:

@@ -47,6 +47,17 @@ def test_the_diff_counts_both_sides_on_the_runs_they_share():
     assert s["runs"] == 1
 
 
+def test_two_fleet_sizes_of_one_seed_are_two_sites():
+    # A sweep with `robots: [4, 10]` makes a site of each size from one seed: matched on kind
+    # and seed alone, each run was compared with both sizes' runs on the other side.
+    before = _runs([4, 8, 6], [40.0, np.nan, 60.0]).assign(seed=1000, robots_asked=[4, 10, 6])
+    after = before.assign(n_parked=[4, 10, 6], success=True, time_to_park_s=[40.0, 90.0, 60.0])
+    s, runs = diff_mod.diff(before, after)
+    assert s["runs"] == 3 and s["skids"] == 20
+    assert (s["parked_skids_before"], s["parked_skids_after"]) == (18, 20)
+    assert runs[runs.changed].robots_asked.tolist() == [10]
+
+
 def test_the_diff_refuses_what_is_not_a_pair_of_sweep_results(tmp_path, capsys):
     runs = _runs([4, 10, 6], [40.0, 90.0, 45.0])
     with pytest.raises(ValueError, match="before: not a sweep's results .*n_parked"):
