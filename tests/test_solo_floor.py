@@ -1,0 +1,55 @@
+"""scripts/solo_floor.py: each skid of a park run alone against its lower bound."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+from helpers import hall_walls, load_script
+
+solo = load_script("solo_floor")
+
+
+def _scenario():
+    return {
+        "name": "two-into-a-box",
+        "seed": 0,
+        "dt_s": 0.05,
+        "duration_s": 60,
+        "map": {"size_m": [12, 8], "walls": hall_walls(12, 8)},
+        "robots": [{"id": "a", "pose": [2.0, 2.5, 0.0]}, {"id": "b", "pose": [2.0, 5.5, 90.0]}],
+        "commands": [
+            {
+                "at_s": 0,
+                "park": {"robots": ["a", "b"], "boundary": [[7, 2], [10, 2], [10, 6], [7, 6]]},
+            }
+        ],
+        "expect": {"success": True},
+    }
+
+
+def test_each_skid_parks_alone_no_faster_than_its_bound(tmp_path):
+    rows = solo.solo_runs(_scenario(), tmp_path)
+    assert [r["robot"] for r in rows] == ["a", "b"]
+    for r in rows:
+        assert r["time_to_park_s"] is not None  # alone in an open hall, each parks
+        assert 1.0 <= r["ratio"] < 2.0
+        assert r["path_m"] > 4.0
+    # One skid only, with its own spot: the other skid and its goal are gone.
+    one = solo.alone(_scenario(), "b")
+    assert [r["id"] for r in one["robots"]] == ["b"]
+    assert one["commands"][0]["park"]["robots"] == ["b"] and "expect" not in one
+
+
+def test_a_skid_outside_the_park_or_a_scenario_without_one_is_refused(tmp_path, capsys):
+    with pytest.raises(ValueError, match="robots: 'c' is not in the first park command"):
+        solo.alone(_scenario(), "c")
+    data = _scenario()
+    data["commands"] = []
+    with pytest.raises(ValueError, match="commands: the scenario has no park command"):
+        solo.solo_runs(data, tmp_path)
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(_scenario()))
+    with pytest.raises(SystemExit) as exc:
+        solo.main([str(path), "--robots", "a,c"])
+    assert exc.value.code == 2
+    assert "'c' is not in the first park command" in capsys.readouterr().err
