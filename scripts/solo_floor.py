@@ -24,18 +24,23 @@ from swarmpark.apps.run import run_world
 from swarmpark.world.scenario import build_world, parse_scenario
 
 
+def first_park(data: dict) -> dict:
+    """The scenario's first park command (the whole entry, ``at_s`` and ``park``)."""
+    park = next((c for c in data.get("commands", []) if "park" in c), None)
+    if park is None:
+        raise ValueError("commands: the scenario has no park command")
+    return park
+
+
 def alone(data: dict, rid: str) -> dict:
     """The scenario with only skid ``rid``, parked by the first park command (its other
     commands dropped)."""
     out = copy.deepcopy(data)
-    out["robots"] = [r for r in data["robots"] if r["id"] == rid]
-    park = next((c for c in data.get("commands", []) if "park" in c), None)
-    if park is None:
-        raise ValueError("commands: the scenario has no park command")
+    park = first_park(out)
     if rid not in park["park"]["robots"]:
         raise ValueError(f"robots: {rid!r} is not in the first park command")
-    park = copy.deepcopy(park)
     park["park"]["robots"] = [rid]
+    out["robots"] = [r for r in out["robots"] if r["id"] == rid]
     out["commands"] = [park]
     out.pop("expect", None)
     return out
@@ -44,10 +49,7 @@ def alone(data: dict, rid: str) -> dict:
 def solo_runs(data: dict, base: Path, robots: list[str] | None = None) -> list[dict]:
     """One row per skid: ``robot``, ``time_to_park_s``, ``lower_bound_s``, ``ratio`` (None if
     it did not park), ``path_m`` and ``time_lost_s``."""
-    park = next((c for c in data.get("commands", []) if "park" in c), None)
-    if park is None:
-        raise ValueError("commands: the scenario has no park command")
-    ids = park["park"]["robots"] if robots is None else robots
+    ids = first_park(data)["park"]["robots"] if robots is None else robots
     runs = [alone(data, rid) for rid in ids]  # every id checked before the first run
     rows = []
     for rid, one in zip(ids, runs, strict=True):
