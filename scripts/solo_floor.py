@@ -73,21 +73,24 @@ def _split(out, at_s: float, parked_at: float | None) -> tuple[float | None, flo
     return round(t_near - at_s, 3), final
 
 
-def solo_runs(data: dict, base: Path, robots: list[str] | None = None) -> list[dict]:
+def lone_scenarios(data: dict, robots: list[str] | None = None) -> list[tuple[str, dict]]:
+    """``(skid, scenario with that skid alone)`` for each skid of the first park command (or
+    ``robots``); raises ValueError naming a skid that is not in it, before any run."""
+    ids = first_park(data)["park"]["robots"] if robots is None else robots
+    return [(rid, alone(data, rid)) for rid in ids]
+
+
+def solo_runs(data: dict, base: Path, robots: list[str] | None = None, lone=None) -> list[dict]:
     """One row per skid: ``robot``, ``time_to_park_s``, ``lower_bound_s``, ``ratio`` (None if
     it did not park), ``path_m``, ``approach_s`` and ``final_s`` (:func:`_split`) and
-    ``time_lost_s``."""
-    park = first_park(data)
-    ids = park["park"]["robots"] if robots is None else robots
-    runs = [alone(data, rid) for rid in ids]  # every id checked before the first run
+    ``time_lost_s``. ``lone``: :func:`lone_scenarios` of ``data`` if made already."""
+    at_s = float(first_park(data).get("at_s", 0.0))
     rows = []
-    for rid, one in zip(ids, runs, strict=True):
+    for rid, one in lone_scenarios(data, robots) if lone is None else lone:
         out = run_world(build_world(parse_scenario(one, base)))
         result = out.result
         t, bound = result["time_to_park_s"], result["lower_bound_s"]
-        approach, final = _split(
-            out, float(park.get("at_s", 0.0)), result["robots"][rid]["parked_at_s"]
-        )
+        approach, final = _split(out, at_s, result["robots"][rid]["parked_at_s"])
         rows.append(
             {
                 "robot": rid,
@@ -133,13 +136,18 @@ def main(argv: list[str]) -> None:
         if not path.is_file():
             ap.error(f"scenario: no such file ({path})")
     robots = a.robots.split(",") if a.robots else None
-    everything = []
+    # Every scenario read and every skid checked before the first run (a bad id in the last
+    # file is refused before the runs of the others).
+    sites = []
     for path in a.scenarios:
         data = yaml.safe_load(path.read_text())
         try:
-            rows = solo_runs(data, path.parent, robots)
+            sites.append((path, data, lone_scenarios(data, robots)))
         except ValueError as exc:
             ap.error(f"{path}: {exc}")
+    everything = []
+    for path, data, lone in sites:
+        rows = solo_runs(data, path.parent, lone=lone)
         print(f"{path}")
         print(
             "robot | time_to_park_s | lower_bound_s | ratio | path_m | approach_s | final_s | time lost (s)"

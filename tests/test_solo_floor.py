@@ -83,3 +83,15 @@ def test_a_skid_outside_the_park_or_a_scenario_without_one_is_refused(tmp_path, 
         solo.main([str(path), "--robots", "a,c"])
     assert exc.value.code == 2
     assert "'c' is not in the first park command" in capsys.readouterr().err
+    # A bad skid in the last of several files is refused before any run: nothing printed.
+    other = dict(_scenario(), robots=[{"id": "a", "pose": [2.0, 2.5, 0.0]}])
+    other["commands"] = [
+        {"at_s": 0, "park": {**_scenario()["commands"][0]["park"], "robots": ["a"]}}
+    ]
+    last = tmp_path / "t.yaml"
+    last.write_text(yaml.safe_dump(other))
+    with pytest.raises(SystemExit) as exc:
+        solo.main([str(path), str(last), "--robots", "b"])
+    assert exc.value.code == 2
+    out = capsys.readouterr()
+    assert "t.yaml: robots: 'b' is not in the first park command" in out.err and out.out == ""
