@@ -75,3 +75,43 @@ def test_the_diff_refuses_what_is_not_a_pair_of_sweep_results(tmp_path, capsys):
     assert "after: no such file" in capsys.readouterr().err
     diff_mod.main([str(path), str(path)])
     assert "0 of 3 runs changed" in capsys.readouterr().out
+
+
+def test_pairs_are_pooled_and_tested_per_site(tmp_path, capsys):
+    # Two pairs: the unperturbed runs, then a draw; the sites are paired across both.
+    before = _runs([4, 8, 6], [40.0, np.nan, 60.0])
+    after = _runs([4, 10, 5], [40.0, 90.0, np.nan])
+    plain_b, plain_a = (
+        before.drop(columns="param.perturb.draw"),
+        after.drop(columns="param.perturb.draw"),
+    )
+    runs = pd.concat([diff_mod.diff(before, after)[1], diff_mod.diff(plain_b, plain_a)[1]])
+    p = diff_mod.pooled(runs)
+    assert p["runs"] == 6 and p["skids"] == 40
+    assert (p["parked_runs_before"], p["parked_runs_after"]) == (4, 4)
+    assert (p["parked_skids_before"], p["parked_skids_after"]) == (36, 38)
+    # Per site over both runs: door 1000 0, door 1001 +4, hangar 1000 -2.
+    assert p["sites"] == 3
+    assert p["site_gain_mean"] == pytest.approx(2 / 3)
+    assert p["site_gain_se"] == pytest.approx(np.std([0, 4, -2], ddof=1) / np.sqrt(3))
+    assert (p["sites_gained"], p["sites_lost"]) == (1, 1)
+    assert p["parked_both"] == 2 and p["time_ratio"] == pytest.approx(1.0)
+    paths = []
+    for k, frame in enumerate((before, after, plain_b, plain_a)):
+        paths.append(tmp_path / f"{k}.parquet")
+        frame.to_parquet(paths[-1])
+    diff_mod.main([str(x) for x in paths])
+    out = capsys.readouterr().out
+    assert "== pooled: 6 runs, 40 skids" in out
+    assert "skids parked:      36 before, 38 after" in out
+    assert "mean +0.67 (standard error 1.76) over 3 sites; 1 gained, 1 lost" in out
+    with pytest.raises(SystemExit) as exc:
+        diff_mod.main([str(x) for x in paths[:3]])
+    assert exc.value.code == 2
+    assert "files: give BEFORE AFTER pairs (got 3 files)" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        diff_mod.main([str(paths[0]), str(paths[1]), str(paths[0]), str(paths[3])])
+    assert exc.value.code == 2
+    assert "not the same parameters (param.perturb.draw on one side) (pair 2)" in (
+        capsys.readouterr().err
+    )
