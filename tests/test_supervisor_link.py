@@ -303,6 +303,68 @@ def test_the_supervisor_hands_the_deepest_goal_to_the_first_in_line():
     assert x_goal[2] > x_goal[1] > x_goal[0]  # c, first in line, deepest
 
 
+def test_a_hand_over_the_re_assignment_would_keep_is_made():
+    """The hand-over's check is the re-assignment itself. Skid a waits at a dead end's
+    mouth (goal B) for skid b, bound for the deeper goal A but farther from it: they swap.
+    Elsewhere, skid p docks 0.59 m from its goal D, beside goal E, whose skid q stands
+    beside D: giving p E and q D would save more than the re-assignment's hysteresis, but
+    the re-assignment never takes a spot from under a docking skid, so it keeps the swap
+    (a check against the unconstrained optimum refused it: found on a 10-skid training
+    car, where a skid waited in the door for one behind it until the end of the run)."""
+    poses = [[6.0, 2.6, 0.0], [4.6, 2.6, 0.0], [3.59, 5.0, 0.0], [1.9, 5.0, 90.0]]
+    sup = Supervisor(
+        make_world(
+            map={"size_m": [12, 6], "resolution_m": 0.05},
+            robots=[{"id": f"r{k}", "pose": p} for k, p in enumerate(poses)],
+        )
+    )
+    goals = np.array([[9.0, 2.6, 0.0], [7.6, 2.6, 0.0], [3.0, 5.0, 0.0], [3.6, 5.0, 0.0]])
+    group = ParkGroup(
+        robots=np.arange(4),
+        goals=goals,
+        cost="euclidean",
+        goal_of=np.array([1, 0, 2, 3]),  # a -> B, b -> A, p -> D, q -> E
+        fill_order=(0, 1, 2, 3),
+        boundary=box(2.0, 2.0, 10.0, 5.5),
+        method="stacking",
+        report={},
+        goal_dims=((1.2, 0.8),) * 4,
+        blocks=((), (0,), (), ()),  # B walls in A
+    )
+    sup.groups = [group]
+    assert fill_order.held(sup.groups, sup.poses_known).tolist() == [True, False, False, False]
+    assert fill_order.hand_over(group, sup.poses_known) == (0, 1)
+    swapped = np.array([0, 1, 2, 3])
+    cost = sup._cost_matrix(group.robots, goals, "euclidean", None)
+    now = cost[np.arange(4), swapped].sum()
+    best = cost[np.arange(4), assign_mod.assign(cost)].sum()
+    assert now - best > max(assign_mod.HYSTERESIS_FRACTION * now, assign_mod.HYSTERESIS_ABS_M)
+    assert sup._reassigned(group, swapped) is None
+    sup._hand_over()
+    assert group.goal_of.tolist() == [0, 1, 2, 3]
+    # a, first in line, goes deepest; b waits for it.
+    assert fill_order.held(sup.groups, sup.poses_known).tolist() == [False, True, False, False]
+    sup._reassign()  # and the re-assignment keeps it
+    assert group.goal_of.tolist() == [0, 1, 2, 3]
+    # Without the docking skid's guard (p 0.7 m off D), the re-assignment would undo the
+    # swap, and the hand-over is not made.
+    sup2 = Supervisor(
+        make_world(
+            map={"size_m": [12, 6], "resolution_m": 0.05},
+            robots=[
+                {"id": f"r{k}", "pose": p}
+                for k, p in enumerate([*poses[:2], [3.7, 5.0, 0.0], poses[3]])
+            ],
+        )
+    )
+    group.goal_of = np.array([1, 0, 2, 3])
+    group.goals = goals.copy()
+    group.goals[3, 0] = 3.7
+    sup2.groups = [group]
+    sup2._hand_over()
+    assert group.goal_of.tolist() == [1, 0, 2, 3]
+
+
 def test_two_spots_that_shut_a_bay_together_hold_the_second_skid():
     # A bay open to the west (x = 1); the two goals at its mouth, B and C, each leave a lane
     # to the deep goal A, but not both: the layout's pairwise blocks see nothing, and the

@@ -616,39 +616,42 @@ class CommandsMixin:
     def _reassign(self) -> None:
         """Re-run each parking group's assignment (2018 Algorithm 2), with hysteresis."""
         for g in self.groups:
-            if g.cost == "sequential" or len(g.robots) < 2:
-                continue
-            if g.cost == "path":
-                continue  # path costs are recomputed on replans only (Dijkstra per goal)
-            fps = [self.info.footprints[i] for i in g.robots]
-            dims = [(f.length_m, f.width_m) for f in fps]
-            pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[g.goal_of])
-            locked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
-            docking = pos_err <= DOCKING_LOCK_M  # parked or docking
-            if len(g.robots) > assign_mod.LOCAL_REASSIGN_ABOVE:
-                new, changed = self._reassign_local(g, dims, locked)
-            else:
-                fits = assign_mod.footprint_fits(dims, g.goal_dims)
-                cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
-                try:
-                    new, changed = assign_mod.reassign(cost, g.goal_of, locked)
-                except assign_mod.AssignmentError:
-                    continue
-            if changed and np.any(new[docking] != g.goal_of[docking]):
-                continue  # it would take a spot from under a skid parked or docking on it
-            if changed:
+            new = self._reassigned(g, g.goal_of)
+            if new is not None:
                 g.switches += int(np.sum(new != g.goal_of))
                 g.goal_of = new
                 self._set_goals(g.robots, g.goals[new])
 
+    def _reassigned(self, g, goal_of: np.ndarray) -> np.ndarray | None:
+        """What the re-assignment makes of group ``g``'s goals ``goal_of``: the new goal per
+        robot, or None where it keeps them (within its hysteresis, or because it would take a
+        spot from under a skid parked or docking on it)."""
+        if g.cost == "sequential" or len(g.robots) < 2:
+            return None
+        if g.cost == "path":
+            return None  # path costs are recomputed on replans only (Dijkstra per goal)
+        fps = [self.info.footprints[i] for i in g.robots]
+        dims = [(f.length_m, f.width_m) for f in fps]
+        pos_err, head_err = goal_errors(self.poses_known[g.robots], g.goals[goal_of])
+        locked = (pos_err <= POSITION_TOL_M) & (head_err <= HEADING_TOL_RAD)
+        docking = pos_err <= DOCKING_LOCK_M  # parked or docking
+        try:
+            if len(g.robots) > assign_mod.LOCAL_REASSIGN_ABOVE:
+                new, changed = self._reassign_local(g, goal_of, dims, locked)
+            else:
+                fits = assign_mod.footprint_fits(dims, g.goal_dims)
+                cost = self._cost_matrix(g.robots, g.goals, g.cost, fits)
+                new, changed = assign_mod.reassign(cost, goal_of, locked)
+        except assign_mod.AssignmentError:
+            return None
+        if not changed or np.any(new[docking] != goal_of[docking]):
+            return None
+        return new
+
     def _hand_over(self) -> None:
         """Swap the goals of a skid waiting outside for a deeper one and the skid it waits
         for, when it stands nearer that deeper goal (:func:`.fill_order.hand_over`), unless
-        the swap costs more than the re-assignment's hysteresis above the unconstrained
-        optimum. That is stricter than the re-assignment, which keeps parked skids on their
-        goals and never takes a docking skid's, and would keep some swaps this refuses:
-        checking with the re-assignment itself was tried and left out (docs/navigation.md,
-        session 47)."""
+        the re-assignment would undo the swap (:meth:`_reassigned`)."""
         for g in self.groups:
             if g.cost == "sequential" or (g.reach is None and not any(g.blocks)):
                 continue
@@ -662,21 +665,15 @@ class CommandsMixin:
             a, b = pair
             new = g.goal_of.copy()
             new[a], new[b] = g.goal_of[b], g.goal_of[a]
-            if g.cost != "path":
-                # Kept only within the hysteresis of the unconstrained optimum.
-                cost = self._cost_matrix(g.robots, g.goals, g.cost, fit)
-                rows = np.arange(len(new))
-                now = cost[rows, new].sum()
-                best = cost[rows, assign_mod.assign(cost)].sum()
-                margin = max(assign_mod.HYSTERESIS_FRACTION * now, assign_mod.HYSTERESIS_ABS_M)
-                if now - best > margin:
-                    continue
+            if self._reassigned(g, new) is not None:
+                continue
             g.switches += 2
             g.goal_of = new
             self._set_goals(g.robots, g.goals[new])
 
-    def _reassign_local(self, g, dims, locked) -> tuple[np.ndarray, bool]:
-        """A large group's re-assignment by swaps between neighbours (O(n k), not O(n^3))."""
+    def _reassign_local(self, g, goal_of, dims, locked) -> tuple[np.ndarray, bool]:
+        """A large group's re-assignment of goals ``goal_of`` by swaps between neighbours
+        (O(n k), not O(n^3))."""
         rd, gd = np.asarray(dims, float), np.asarray(g.goal_dims, float).reshape(-1, 2)
 
         def fits(rows, cols):
@@ -686,7 +683,7 @@ class CommandsMixin:
         return assign_mod.reassign_local(
             self.poses_known[g.robots, :2],
             g.goals[:, :2],
-            g.goal_of,
+            goal_of,
             g.cost,
             fits=fits if len(gd) else None,
             locked=locked,
