@@ -68,40 +68,24 @@ def diff(before: pd.DataFrame, after: pd.DataFrame) -> tuple[dict, pd.DataFrame]
     m = before.merge(after, on=on, suffixes=("_before", "_after"))
     if m.empty:
         raise ValueError(f"before, after: no site in common (matched on {', '.join(on)})")
-    both = m[m.success_before.astype(bool) & m.success_after.astype(bool)]
-    ratio = both.time_to_park_s_after / both.time_to_park_s_before
-    summary = {
-        "runs": len(m),
-        "skids": int(m.n_robots_before.sum()),
-        **{
-            f"{what}_{side}": int(m[f"{col}_{side}"].sum())
-            for what, col in (
-                ("parked_runs", "success"),
-                ("parked_skids", "n_parked"),
-                ("contacts", "n_collisions"),
-                ("deadlocks", "n_deadlocks"),
-            )
-            for side in ("before", "after")
-        },
-        "parked_both": len(both),
-        "time_ratio": float(np.exp(np.log(ratio).mean())) if len(both) else None,
-    }
     runs = m[on].copy()
     runs["skids"] = m.n_robots_before
     for side in ("before", "after"):
         runs[f"parked_{side}"] = m[f"n_parked_{side}"]
         runs[f"time_{side}"] = m[f"time_to_park_s_{side}"]
         runs[f"success_{side}"] = m[f"success_{side}"].astype(bool)
+        runs[f"contacts_{side}"] = m[f"n_collisions_{side}"]
+        runs[f"deadlocks_{side}"] = m[f"n_deadlocks_{side}"]
     same_time = np.isclose(runs.time_before, runs.time_after) | (
         runs.time_before.isna() & runs.time_after.isna()
     )
     runs["changed"] = (runs.parked_before != runs.parked_after) | ~same_time
-    return summary, runs
+    return pooled(runs), runs
 
 
 def pooled(runs: pd.DataFrame) -> dict:
-    """Totals of the runs of several :func:`diff` calls (concatenated ``runs`` frames), and
-    the paired test per site: each site's (``kind``, ``seed``, ``robots_asked`` where
+    """Totals of the runs of one or several :func:`diff` calls (``runs`` frames, concatenated),
+    and the paired test per site: each site's (``kind``, ``seed``, ``robots_asked`` where
     present) skids parked after less before, summed over its runs; their mean over the
     sites, its standard error, and the sites that gained and lost."""
     site = ["kind", "seed"] + (["robots_asked"] if "robots_asked" in runs.columns else [])
@@ -118,7 +102,12 @@ def pooled(runs: pd.DataFrame) -> dict:
         "skids": int(runs.skids.sum()),
         **{
             f"{what}_{side}": int(runs[f"{col}_{side}"].sum())
-            for what, col in (("parked_runs", "success"), ("parked_skids", "parked"))
+            for what, col in (
+                ("parked_runs", "success"),
+                ("parked_skids", "parked"),
+                ("contacts", "contacts"),
+                ("deadlocks", "deadlocks"),
+            )
             for side in ("before", "after")
         },
         "parked_both": len(both),
@@ -164,17 +153,7 @@ def main(argv: list[str]) -> None:
     p = pooled(allruns)
     if len(pairs) > 1:
         print(f"\n== pooled: {p['runs']} runs, {p['skids']} skids")
-        print(
-            f"runs fully parked: {p['parked_runs_before']} before, {p['parked_runs_after']} after"
-        )
-        print(
-            f"skids parked:      {p['parked_skids_before']} before, {p['parked_skids_after']} after"
-        )
-        if p["time_ratio"] is not None:
-            print(
-                f"time to park, the {p['parked_both']} runs parked both ways: "
-                f"after / before {p['time_ratio']:.3f} (geometric mean)"
-            )
+        _totals(p)
     se = "-" if p["site_gain_se"] is None else f"{p['site_gain_se']:.2f}"
     print(
         f"skids parked per site, after less before, summed over its {p['runs']} runs: "
@@ -183,8 +162,7 @@ def main(argv: list[str]) -> None:
     )
 
 
-def _report(s: dict, runs: pd.DataFrame, show_all: bool) -> None:
-    print(f"{s['runs']} runs in common, {s['skids']} skids")
+def _totals(s: dict) -> None:
     print(f"runs fully parked: {s['parked_runs_before']} before, {s['parked_runs_after']} after")
     print(f"skids parked:      {s['parked_skids_before']} before, {s['parked_skids_after']} after")
     print(f"contacts:          {s['contacts_before']} before, {s['contacts_after']} after")
@@ -194,11 +172,16 @@ def _report(s: dict, runs: pd.DataFrame, show_all: bool) -> None:
             f"time to park, the {s['parked_both']} runs parked both ways: "
             f"after / before {s['time_ratio']:.3f} (geometric mean)"
         )
+
+
+def _report(s: dict, runs: pd.DataFrame, show_all: bool) -> None:
+    print(f"{s['runs']} runs in common, {s['skids']} skids")
+    _totals(s)
     shown = runs if show_all else runs[runs.changed]
     print(f"\n{int(runs.changed.sum())} of {len(runs)} runs changed")
     if len(shown):
-        cols = ["changed", "success_before", "success_after"]
-        print(shown.drop(columns=cols).to_string(index=False))
+        extra = [c for c in runs.columns if c.startswith(("success_", "contacts_", "deadlocks_"))]
+        print(shown.drop(columns=["changed", *extra]).to_string(index=False))
 
 
 if __name__ == "__main__":
