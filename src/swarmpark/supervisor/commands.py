@@ -651,7 +651,8 @@ class CommandsMixin:
     def _hand_over(self) -> None:
         """Swap the goals of a skid waiting outside for a deeper one and the skid it waits
         for, when it stands nearer that deeper goal (:func:`.fill_order.hand_over`), unless
-        the re-assignment would undo the swap (:meth:`_reassigned`)."""
+        the re-assignment, run on the swapped goals, would change them (:meth:`_reassigned`;
+        it has just run on the goals before the swap, so a change is the swap undone)."""
         for g in self.groups:
             if g.cost == "sequential" or (g.reach is None and not any(g.blocks)):
                 continue
