@@ -8,7 +8,8 @@ or the scenario's name; ``seed``; the fleet size asked for) and the sweep's para
 (``param.*`` columns, which must be the same on both sides), so a sweep run on a subset of
 the other's sites compares on the sites they share. Printed: runs fully parked, skids
 parked, contacts and deadlock episodes on either side; the geometric mean of time to park
-(after / before) over the runs parked both ways; and the runs whose skids parked or time to
+(after / before) over the runs parked both ways; runs and skids parked per kind of site;
+and the runs whose skids parked or time to
 park changed (``--all``: every run). Exits with status 2 if a file is missing or not a
 sweep's results, the two sweep different parameters, or they share no site.
 
@@ -98,6 +99,7 @@ def pooled(runs: pd.DataFrame) -> dict:
     )
     n = len(per_site)
     return {
+        "by_kind": by_kind(runs),
         "runs": len(runs),
         "skids": int(runs.skids.sum()),
         **{
@@ -118,6 +120,22 @@ def pooled(runs: pd.DataFrame) -> dict:
         "sites_gained": int((per_site > 0).sum()),
         "sites_lost": int((per_site < 0).sum()),
     }
+
+
+def by_kind(runs: pd.DataFrame) -> pd.DataFrame:
+    """Per kind of site: its runs and skids, and on either side the runs fully parked and
+    the skids parked (a change that wins on doors and loses on corridors shows here)."""
+    g = runs.groupby("kind", sort=True)
+    return pd.DataFrame(
+        {
+            "runs": g.size(),
+            "skids": g.skids.sum(),
+            "full_before": g.success_before.sum(),
+            "full_after": g.success_after.sum(),
+            "parked_before": g.parked_before.sum(),
+            "parked_after": g.parked_after.sum(),
+        }
+    ).astype(int)
 
 
 def _read(ap: argparse.ArgumentParser, name: str, path: Path) -> pd.DataFrame:
@@ -154,6 +172,9 @@ def main(argv: list[str]) -> None:
     if len(pairs) > 1:
         print(f"\n== pooled: {p['runs']} runs, {p['skids']} skids")
         _totals(p)
+    if p["by_kind"].index.nunique() > 1:
+        print("\nper kind of site:")
+        print(p["by_kind"].to_string())
     se = "-" if p["site_gain_se"] is None else f"{p['site_gain_se']:.2f}"
     print(
         f"skids parked per site, after less before, summed over its {p['runs']} runs: "

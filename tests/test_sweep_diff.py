@@ -96,6 +96,10 @@ def test_pairs_are_pooled_and_tested_per_site(tmp_path, capsys):
     assert p["site_gain_se"] == pytest.approx(np.std([0, 4, -2], ddof=1) / np.sqrt(3))
     assert (p["sites_gained"], p["sites_lost"]) == (1, 1)
     assert p["parked_both"] == 2 and p["time_ratio"] == pytest.approx(1.0)
+    # Per kind: two door sites (two runs each), one hangar.
+    k = p["by_kind"]
+    assert k.loc["door"].tolist() == [4, 28, 2, 4, 24, 28]
+    assert k.loc["hangar"].tolist() == [2, 12, 2, 0, 12, 10]
     paths = []
     for k, frame in enumerate((before, after, plain_b, plain_a)):
         paths.append(tmp_path / f"{k}.parquet")
@@ -105,6 +109,7 @@ def test_pairs_are_pooled_and_tested_per_site(tmp_path, capsys):
     assert "== pooled: 6 runs, 40 skids" in out
     assert "skids parked:      36 before, 38 after" in out
     assert "mean +0.67 (standard error 1.76) over 3 sites; 1 gained, 1 lost" in out
+    assert "per kind of site:" in out
     with pytest.raises(SystemExit) as exc:
         diff_mod.main([str(x) for x in paths[:3]])
     assert exc.value.code == 2
