@@ -47,7 +47,7 @@ def _supervisor():
 def test_the_skids_come_in_at_the_door_and_its_mouth_gets_no_spot():
     sup = _supervisor()
     cmd = ParkCmd(robots=[f"s{k}" for k in range(4)], boundary=BOX, heading_deg=0)
-    _, boundary, lay = sup.plan_layout(cmd)
+    _, boundary, lay, _ = sup.plan_layout(cmd)
     ox, oy = lay.report["opening"]
     # The skids stand at y 5-6.2: the boundary as the crow flies is nearest at y ~5.6.
     assert ox == 9.3 and DOOR_Y[0] - 0.5 <= oy <= DOOR_Y[1] + 0.5, (ox, oy)

@@ -38,7 +38,7 @@ def _spots(sup: Supervisor, idx, goals):
 
 def test_no_spot_is_laid_over_an_idle_skid_in_the_boundary():
     sup = Supervisor(_scenario())
-    idx, _, lay = sup.plan_layout(ParkCmd(robots=[f"r{i}" for i in range(6)], boundary=BOX))
+    idx, _, lay, _ = sup.plan_layout(ParkCmd(robots=[f"r{i}" for i in range(6)], boundary=BOX))
     idle = footprint_polygon(sup.poses_known[sup.index["idle"]], sup.info.footprints[-1])
     gaps = [s.distance(idle) for s in _spots(sup, idx, lay.poses)]
     assert min(gaps) >= 0.3 - 1e-6  # the command's margin, as from a wall

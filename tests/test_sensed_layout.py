@@ -70,7 +70,7 @@ def test_a_crate_the_scans_saw_before_the_park_gets_no_spot():
     sup = Supervisor(build_world(_scenario()))
     assert isinstance(sup.park_map, SensedMap)
     # Before any scan the skids know only the map: the same park puts a spot on the crate.
-    _, _, lay = sup.plan_layout(ParkCmd(robots=["a1", "a2"], boundary=NEAR_BOX))
+    _, _, lay, _ = sup.plan_layout(ParkCmd(robots=["a1", "a2"], boundary=NEAR_BOX))
     assert any(_on(lay.poses, sup, SEEN))
     _run_until(sup, 1.0 + 1e-6)  # the park at 1 s ran, after 20 scans
     out = sup.outcomes[-1]
@@ -88,7 +88,7 @@ def test_a_crate_no_scan_saw_is_not_known_to_the_layout():
     region = Polygon(FAR_BOX)
     solids = sup.park_map.solids(region)
     assert solids is None or not solids.intersects(Polygon(UNSEEN).buffer(-0.05))
-    _, _, lay = sup.plan_layout(ParkCmd(robots=["a1", "a2"], boundary=FAR_BOX))
+    _, _, lay, _ = sup.plan_layout(ParkCmd(robots=["a1", "a2"], boundary=FAR_BOX))
     assert any(_on(lay.poses, sup, UNSEEN))
     grid = sup.park_map.grid()
     inside = grid.world_to_cell(np.array([[12.2, 1.7]]))[0]

@@ -590,7 +590,7 @@ def test_the_reassignment_never_takes_a_spot_from_under_a_parked_skid():
         assignment="formation",
     )
     spread = [{"id": k, "pose": [1.0 + 2.0 * n, 1.0, 0.0]} for n, k in enumerate("pqr")]
-    _, _, lay = Supervisor(make_world(map={"size_m": [12, 6]}, robots=spread)).plan_layout(cmd)
+    _, _, lay, _ = Supervisor(make_world(map={"size_m": [12, 6]}, robots=spread)).plan_layout(cmd)
     goals = lay.poses[np.argsort(lay.poses[:, 0])]  # west to east
     robots = [
         {"id": "p", "pose": [goals[0, 0], goals[0, 1], 0.0]},  # parked on the western spot

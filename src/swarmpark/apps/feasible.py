@@ -39,7 +39,11 @@ class FeasibilityError(ValueError):
 
 
 def park_layout(world: World, park, starts: np.ndarray) -> LayoutResult:
-    """The layout a park command produces, as :meth:`Supervisor.plan_layout` computes it."""
+    """A park command's layout with one spot per skid at its own size. The supervisor lays a
+    park of several sizes out at the largest size where that fits
+    (:func:`swarmpark.supervisor.commands.uniform_spots`); the generator's check keeps the
+    layout it was written with, so the generated sites (and their durations) stay as they
+    were; a run's goals may then lie elsewhere than these."""
     idx = [world.ids.index(r) for r in park.robots]
     boundary = as_simple_polygon(park.boundary, "park.boundary")
     heading = park.heading_deg if park.heading_deg == "auto" else math.radians(park.heading_deg)

@@ -19,7 +19,12 @@ from shapely.geometry import Point, Polygon
 from shapely.ops import nearest_points, unary_union
 
 from swarmpark import assign as assign_mod
-from swarmpark.core.geometry import GeometryError, as_simple_polygon, footprint_polygon
+from swarmpark.core.geometry import (
+    Footprint,
+    GeometryError,
+    as_simple_polygon,
+    footprint_polygon,
+)
 from swarmpark.core.limits import MAX_BOUNDARY_VERTICES
 from swarmpark.metrics import HEADING_TOL_RAD, POSITION_TOL_M, goal_errors
 from swarmpark.plan.grid import build_costmap, entry_points
@@ -96,6 +101,8 @@ class ParkGroup:
     report: dict
     #: (length, width) of the footprint each goal was laid out for.
     goal_dims: tuple[tuple[float, float], ...] = ()
+    #: The footprint each goal was laid out for (its pivot is the goal's pose).
+    goal_fps: tuple = ()
     #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
     blocks: tuple[tuple[int, ...], ...] = ()
     #: Reachability of the goals from outside with some of them taken (holds as they fill).
@@ -107,6 +114,22 @@ class ParkGroup:
     #: checks that found one blocked (:mod:`.spot_watch`).
     relayouts: int = 0
     blocked_checks: int = 0
+
+
+def uniform_spots(fps) -> list | None:
+    """One spot size for a park of skids of several sizes: the longest length and the widest
+    width, pivot in the middle, or None (one size already, or a pivot off the middle: a
+    smaller skid's goal would not be the spot's). Spots of one size are interchangeable:
+    any skid may take any goal, so the fill order's hand-over (:func:`.fill_order.hand_over`)
+    and the re-assignment are never refused by size. With spots laid out one per skid's
+    size, a small skid waiting at a car's door for a large one bound deeper could never hand
+    over: only a large skid fits a large spot, and every large spot has its large skid."""
+    sizes = {(f.length_m, f.width_m) for f in fps}
+    if len(sizes) < 2 or any(abs(f.pivot_from_rear_m - f.length_m / 2) > 1e-9 for f in fps):
+        return None
+    length = max(f.length_m for f in fps)
+    width = max(f.width_m for f in fps)
+    return [Footprint(length, width, length / 2)] * len(fps)
 
 
 class CommandsMixin:
@@ -179,18 +202,28 @@ class CommandsMixin:
         solids = self._known_solids(boundary)
         if places:
             solids = unary_union(places if solids is None else [solids, *places])
-        try:
-            lay = layout(
+
+        def lay_out(spots):
+            return layout(
                 boundary,
-                fps,
+                spots,
                 heading=heading,
                 method=cmd.method,
                 margin_m=cmd.margin_m,
                 obstacles=solids,
                 opening=opening,
                 # Room for a skid coming in to turn on the spot by the opening.
-                apron_m=2.0 * max(f.reach_m for f in fps),
+                apron_m=2.0 * max(f.reach_m for f in spots),
             )
+
+        uniform = uniform_spots(fps)
+        if uniform is not None:
+            try:
+                return idx, boundary, lay_out(uniform), uniform
+            except LayoutError:
+                pass  # no room for every spot at the largest size: one spot per skid's size
+        try:
+            lay = lay_out(fps)
         except LayoutError as exc:
             if not names or exc.fits is None:
                 raise
@@ -200,7 +233,7 @@ class CommandsMixin:
                 f"({shown})",
                 fits=exc.fits,
             ) from None
-        return idx, boundary, lay
+        return idx, boundary, lay, fps
 
     def _standing_others(self, idx: np.ndarray, boundary: Polygon) -> tuple[list[str], list]:
         """The skids outside a park command that will stand in its boundary, as their ids and
@@ -271,17 +304,17 @@ class CommandsMixin:
         changes nothing, so a server can run it off its sim thread. Returns the plan or the
         reason it cannot be made."""
         try:
-            idx, boundary, lay = self.plan_layout(cmd)
+            idx, boundary, lay, fps = self.plan_layout(cmd)
         except (ValueError, GeometryError) as exc:
             return str(exc)
         goals = np.asarray(lay.poses, float)
-        fps = [self.info.footprints[i] for i in idx]
         report = dict(lay.report)
         order, blocks, reach, flags = self._fill_holds(goals, fps, boundary, tuple(lay.fill_order))
         if check_reach or flags is not None:
             self._flag_unreachable(report, goals, fps, order, flags)
         fits = assign_mod.footprint_fits(
-            [(f.length_m, f.width_m) for f in fps], [(f.length_m, f.width_m) for f in fps]
+            [(self.info.footprints[i].length_m, self.info.footprints[i].width_m) for i in idx],
+            [(f.length_m, f.width_m) for f in fps],
         )
         cost = self._cost_matrix(idx, goals, cmd.assignment, fits)
         try:
@@ -298,6 +331,7 @@ class CommandsMixin:
             lay.method,
             report,
             goal_dims=tuple((f.length_m, f.width_m) for f in fps),
+            goal_fps=tuple(fps),
             blocks=blocks,
             reach=reach,
             command=cmd,
@@ -306,7 +340,7 @@ class CommandsMixin:
             self.world.grid,
             self.truth_poses()[idx],
             goals,
-            min(f.width_m for f in fps) / 2,
+            min(self.info.footprints[i].width_m for i in idx) / 2,
             self.info.max_speed_mps[idx],
         )
         return ParkPlan(group, bound_inputs, check_reach, flags)
@@ -364,7 +398,7 @@ class CommandsMixin:
         self._set_goals(idx, goals[group.goal_of])
         self.metrics.defer_lower_bound(*plan.bound_inputs)
         if not plan.reach_checked and len(goals) <= MAX_REACH_CHECKED:
-            fps = [self.info.footprints[i] for i in idx]
+            fps = group.goal_fps
             if plan.flags is not None:
                 check = partial(list, plan.flags)
             else:
