@@ -158,10 +158,14 @@ def test_a_generated_open_deck_parks_with_onboard_localization():
     """Open-deck training site 2018 (6 skids, AMCL with cooperation): the block parks 3.4-4.8 m
     from the east wall and more than 5 m from the others, so nothing in range shows y. With
     200 particles per skid it ended 8 cm off as a block and 2 of 6 parked; with 1000 and
-    shortest paths, 3.8 cm; with coastal paths (the default) 1.9 cm (docs/sensing.md)."""
+    shortest paths, 3.8 cm; with coastal paths (the default) 1.9 cm (docs/sensing.md). Since
+    session 51 its skids of two sizes park on spots of one size (the block is laid out
+    anew): they park in 61 s instead of 129 s, with a mean error of 3.3 cm against 1.0 cm
+    before on the same machine, every skid within 6 cm of its goal (the 20 held-out open
+    decks, docs/sensing.md: no worse)."""
     data = generate("open-deck", 2018, robots=6)
     assert data["sensing"]["localization"] == "amcl"
     r = run_world(build_world(parse_scenario(data))).result
     assert r["success"] and r["collisions"] == []
-    assert r["localization"]["mean_error_m"] <= 0.025
+    assert r["localization"]["mean_error_m"] <= 0.04
     assert all(s["final_position_error_m"] <= 0.10 for s in r["robots"].values())
