@@ -181,7 +181,9 @@ class CommandsMixin:
         return self.command(kind, getattr(cmd, kind))
 
     def plan_layout(self, cmd: ParkCmd):
-        """The layout a park command would produce (for previews); raises ValueError."""
+        """The layout a park command would produce (for previews): ``(robot indices, boundary,
+        layout, spot footprints)``, the last the footprints the spots were laid out for (one
+        size for all, :func:`uniform_spots`, or each skid's own). Raises ValueError."""
         from swarmpark.layout import LayoutError, layout
 
         idx = self._robot_indices(cmd.robots, "park.robots")
