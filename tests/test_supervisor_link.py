@@ -328,7 +328,7 @@ def test_a_hand_over_the_re_assignment_would_keep_is_made():
         boundary=box(2.0, 2.0, 10.0, 5.5),
         method="stacking",
         report={},
-        goal_dims=((1.2, 0.8),) * 4,
+        goal_fps=(Footprint(1.2, 0.8),) * 4,
         blocks=((), (0,), (), ()),  # B walls in A
     )
     sup.groups = [group]

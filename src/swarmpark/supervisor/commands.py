@@ -99,10 +99,8 @@ class ParkGroup:
     boundary: Polygon
     method: str
     report: dict
-    #: (length, width) of the footprint each goal was laid out for.
-    goal_dims: tuple[tuple[float, float], ...] = ()
     #: The footprint each goal was laid out for (its pivot is the goal's pose).
-    goal_fps: tuple = ()
+    goal_fps: tuple[Footprint, ...] = ()
     #: blocks[k]: goals j that become unreachable once goal k is occupied (fill order).
     blocks: tuple[tuple[int, ...], ...] = ()
     #: Reachability of the goals from outside with some of them taken (holds as they fill).
@@ -114,6 +112,11 @@ class ParkGroup:
     #: checks that found one blocked (:mod:`.spot_watch`).
     relayouts: int = 0
     blocked_checks: int = 0
+
+    @property
+    def goal_dims(self) -> tuple[tuple[float, float], ...]:
+        """(length, width) of the footprint each goal was laid out for."""
+        return tuple((f.length_m, f.width_m) for f in self.goal_fps)
 
 
 def uniform_spots(fps) -> list | None:
@@ -314,9 +317,9 @@ class CommandsMixin:
         order, blocks, reach, flags = self._fill_holds(goals, fps, boundary, tuple(lay.fill_order))
         if check_reach or flags is not None:
             self._flag_unreachable(report, goals, fps, order, flags)
+        own = [self.info.footprints[i] for i in idx]
         fits = assign_mod.footprint_fits(
-            [(self.info.footprints[i].length_m, self.info.footprints[i].width_m) for i in idx],
-            [(f.length_m, f.width_m) for f in fps],
+            [(f.length_m, f.width_m) for f in own], [(f.length_m, f.width_m) for f in fps]
         )
         cost = self._cost_matrix(idx, goals, cmd.assignment, fits)
         try:
@@ -332,7 +335,6 @@ class CommandsMixin:
             boundary,
             lay.method,
             report,
-            goal_dims=tuple((f.length_m, f.width_m) for f in fps),
             goal_fps=tuple(fps),
             blocks=blocks,
             reach=reach,
@@ -342,7 +344,7 @@ class CommandsMixin:
             self.world.grid,
             self.truth_poses()[idx],
             goals,
-            min(self.info.footprints[i].width_m for i in idx) / 2,
+            min(f.width_m for f in own) / 2,
             self.info.max_speed_mps[idx],
         )
         return ParkPlan(group, bound_inputs, check_reach, flags)
