@@ -107,6 +107,27 @@ def test_into_a_spot_that_only_a_turn_on_the_spot_reaches():
     np.testing.assert_array_equal(again.poses, m.poses)
 
 
+def test_searches_given_the_windows_masks_plan_as_without_and_leave_them_unchanged():
+    """Several searches in one window share its masks (``masks=``): each plans exactly as a
+    search that works them out itself, also from a start that is not free (the search marks
+    its own start free, on a copy), and the masks it was given are not changed."""
+    occ = _room([(2.4, 1.6, 3.2, 2.4), (1.2, 2.6, 2.0, 3.8), (2.4, 4.0, 3.2, 5.1)])
+    kw = {"speed_mps": 0.5, "yaw_rate_radps": 1.0, "grow_m": 0.02}
+    masks = free_masks(occ, FP, RES, kw["grow_m"])
+    kept = (masks[0].copy(), masks[1].copy())
+    goal = np.array([2.8, 3.2, np.pi / 2])
+    wedged = np.array([3.82, 2.0, np.pi])  # its nose 2 cm from the pillar: not free
+    for start in (np.array([5.0, 1.0, np.pi / 2]), wedged):
+        alone = plan_manoeuvre(occ, np.zeros(2), RES, FP, start, goal, **kw)
+        shared = plan_manoeuvre(occ, np.zeros(2), RES, FP, start, goal, masks=masks, **kw)
+        assert alone is not None and shared is not None
+        np.testing.assert_array_equal(shared.poses, alone.poses)
+        assert shared.start_free == alone.start_free
+    assert not alone.start_free  # the wedged start did test the copy
+    np.testing.assert_array_equal(masks[0], kept[0])
+    np.testing.assert_array_equal(masks[1], kept[1])
+
+
 def test_backs_in_when_cheaper_and_refuses_a_walled_in_goal():
     occ = _room([(0.0, 0.0, 1.9, 6.0)])  # the left third is solid
     # Facing away from a spot right behind it: a short reverse run beats turning twice.

@@ -377,6 +377,7 @@ def plan_manoeuvre(
     reverse_cost: float = 1.5,
     budget: int = 400_000,
     goal_tol_m: float = 0.0,
+    masks: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Manoeuvre | None:
     """A manoeuvre from pose ``start`` to pose ``goal`` (pivot x, y, heading rad, world) in the
     window ``occ`` (``(H, W)`` bool, True occupied; cell ``(r, c)`` centred at ``origin +
@@ -393,10 +394,16 @@ def plan_manoeuvre(
     much dearer; the docking closes the offset): a spot a few cm wider than the skid by a
     wall may be reachable only along a line of cell centres beside its own (a generated
     elevator car: its deep spot by the side wall, every search failed, never parked).
+
+    ``masks``: :func:`free_masks` of this window for ``fp`` and ``grow_m``, where several
+    searches are made in one window (they are most of a search's cost; not changed here).
     """
     occ = np.asarray(occ, bool)
     n_r, n_c = occ.shape
-    free, turn_free = free_masks(occ, fp, res, grow_m)
+    if masks is None:
+        free, turn_free = free_masks(occ, fp, res, grow_m)
+    else:
+        free, turn_free = masks[0].copy(), masks[1]
 
     s, g = snap_state(start, origin, res), snap_state(goal, origin, res)
     for _k, r, c in (s, g):

@@ -23,7 +23,7 @@ from swarmpark.control.nav.params import ManoeuvreParams
 from swarmpark.core.geometry import wrap_angle
 from swarmpark.core.gridmap import refine_occupancy
 from swarmpark.core.progress import NAV_HEADING_LEVER_M, remaining_m
-from swarmpark.plan.lattice import footprint_clear, plan_manoeuvre, stamp_footprint
+from swarmpark.plan.lattice import footprint_clear, free_masks, plan_manoeuvre, stamp_footprint
 
 __all__ = ["ManoeuvrePlanner", "ManoeuvreState", "turn_clear"]
 
@@ -353,6 +353,7 @@ class ManoeuvrePlanner:
         }
         pose = view.poses[i]
         goal = view.goals[i] if goal is None else goal
+        kw["masks"] = free_masks(occ, fp, res, grow_m)  # the same for every search below
         plan = plan_manoeuvre(occ, origin, res, fp, pose, goal, **kw)
         if plan is not None and plan.start_free:
             return plan.segments() if len(plan.poses) >= 2 else None
