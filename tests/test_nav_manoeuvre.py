@@ -394,3 +394,37 @@ def test_a_way_in_round_the_back_beyond_the_window_is_not_walled_in():
     assert np.hypot(end[0] - goal[0], end[1] - goal[1]) < 0.06
     assert st.segments[-1][0] == "reverse"
     assert max(s[2][0] for s in st.segments) > goal[0] + 0.6
+
+
+def test_a_manoeuvre_the_long_way_round_a_skid_on_the_move_waits_for_it():
+    """A wall across the hall with a door, and a way round its end: another skid stands
+    across the door. On the move, it will be gone: the way round the wall's end takes far
+    longer than the way through the door, so the skid plans no manoeuvre now and tries again
+    after ``retry_s`` (not a failure). The same skid standing still is an obstacle like the
+    wall, and the skid goes round; after ``detour_wait_s`` on the same goal it goes round
+    too."""
+    p = ManoeuvreParams(window_margin_m=3.5)
+    walls = [(3.9, 0.0, 4.1, 2.2), (3.9, 3.8, 4.1, 4.7)]
+    poses = [[2.8, 3.0, 0.0], [4.0, 3.0, np.pi / 2]]
+    goal = [5.4, 3.0, 0.0]
+
+    def start(vel, t=0.0, st=None):
+        view = make_view(poses, [goal, poses[1]], boxes=walls, vel=vel, t=t)
+        st = ManoeuvreState() if st is None else st
+        ManoeuvrePlanner(p)._start(view, 0, st)
+        return st
+
+    moving = [[0.0, 0.0], [0.3, 0.0]]
+    st = start(moving)
+    assert st.segments is None and st.failed == 0
+    assert st.retry_t == pytest.approx(p.retry_s)
+    # Standing still: round the wall's end, above it.
+    still = start([[0.0, 0.0], [0.0, 0.0]])
+    assert still.segments and max(s[2][1] for s in still.segments) > 4.7
+    assert still.segments[-1][2][:2] == pytest.approx(goal[:2], abs=0.06)
+    # Waited detour_wait_s for that goal: it goes round.
+    st = start(moving, t=p.detour_wait_s, st=st)
+    assert st.segments and max(s[2][1] for s in st.segments) > 4.7
+    # Off: it goes round at once.
+    p = ManoeuvreParams(window_margin_m=3.5, detour_ratio=0.0)
+    assert start(moving).segments

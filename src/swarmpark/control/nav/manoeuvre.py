@@ -70,6 +70,10 @@ class ManoeuvreState:
     #: skids left out: walled in by them until it docks or its goal changes (the navigator
     #: ranks it above the others meanwhile, so they make room).
     walled: bool = False
+    #: The goal for which it first waited for skids on the move rather than go the long way
+    #: round them, and since when (:meth:`ManoeuvrePlanner._detour`).
+    detour_goal: np.ndarray | None = field(default=None, repr=False)
+    detour_t: float = 0.0
 
     def running(self) -> bool:
         return self.segments is not None
@@ -295,6 +299,9 @@ class ManoeuvrePlanner:
             for grow in grows:
                 segments = self._plan(view, i, *win, grow)
                 if segments:
+                    if self._detour(view, i, st, segments, grow):
+                        st.stop(view.t, p.retry_s)
+                        return
                     break
         if not segments:
             # Walled in by settled skids: no way in a wider window either, but a way with
@@ -304,6 +311,9 @@ class ManoeuvrePlanner:
                 if p.wide_margin_m > p.window_margin_m:
                     wide = self._window(view, i, margin_m=p.wide_margin_m)
                     segments = self._plan(view, i, *wide, p.grow_m) if wide else None
+                    if segments and self._detour(view, i, st, segments, p.grow_m):
+                        st.stop(view.t, p.retry_s)
+                        return
                 if not segments:
                     occ = self._window(view, i, leave_out=settled)
                     st.walled = bool(self._plan(view, i, *occ, p.grow_m))
@@ -323,6 +333,42 @@ class ManoeuvrePlanner:
         st.segments, st.seg, st.blocked_s = segments, 0, 0.0
         st.seg_deadline = np.inf
         st.goal = view.goals[i].copy()
+
+    def _detour(self, view: ControlView, i: int, st: ManoeuvreState, segments, grow: float) -> bool:
+        """Whether skid ``i`` should wait rather than drive ``segments``: they take more than
+        ``detour_ratio`` times, and ``detour_s`` more than, a manoeuvre planned with the
+        skids on the move left out (they will be gone), and it has not yet waited
+        ``detour_wait_s`` for its goal."""
+        p = self.params
+        if p.detour_ratio <= 0:
+            return False
+        moving = (np.abs(view.vel[:, 0]) >= STILL_MPS) | (np.abs(view.vel[:, 1]) >= STILL_RADPS)
+        moving[i] = False
+        if not moving.any():
+            return False
+        goal = view.goals[i]
+        if st.detour_goal is None or np.any(st.detour_goal != goal):
+            st.detour_goal, st.detour_t = goal.copy(), view.t
+        if view.t - st.detour_t >= p.detour_wait_s:
+            return False
+        win = self._window(view, i, leave_out=moving)
+        short = self._plan(view, i, *win, grow) if win is not None else None
+        if not short:
+            return False
+        long_s, short_s = self._duration(view, i, segments), self._duration(view, i, short)
+        return long_s > p.detour_ratio * short_s and long_s - short_s > p.detour_s
+
+    def _duration(self, view: ControlView, i: int, segments) -> float:
+        """How long skid ``i`` takes to drive ``segments`` at the manoeuvre's speed (s)."""
+        share = self.params.speed_share
+        speed, rate = float(view.max_speed[i]) * share, float(view.max_yaw_rate[i]) * share
+        total = 0.0
+        for kind, a, b in segments:
+            if kind == "turn":
+                total += abs(float(wrap_angle(b[2] - a[2]))) / rate
+            else:
+                total += float(np.hypot(b[0] - a[0], b[1] - a[1])) / speed
+        return total
 
     def _plan(
         self,

@@ -254,6 +254,16 @@ class ManoeuvreParams:
     timeout_factor: float = 3.0
     timeout_s: float = 3.0
     retry_s: float = 4.0
+    #: A manoeuvre that only goes the long way round skids on the move waits for them: where
+    #: the one found takes more than ``detour_ratio`` times, and ``detour_s`` more than, the
+    #: one found with the moving skids left out, the skid plans again after ``retry_s``, for
+    #: at most ``detour_wait_s`` on the same goal (then it takes the long way). Found on a
+    #: 10-skid elevator training site: a skid at the car's door, bound for the spot beside
+    #: it, planned round a skid driving through the door's mouth and went round the whole
+    #: car for 45 s, where its spot was a turn and a short reverse run away. 0: off.
+    detour_ratio: float = 2.0
+    detour_s: float = 10.0
+    detour_wait_s: float = 20.0
     #: Tracking: share of top speed and yaw rate, gains, and when a segment is done. The
     #: speed and turn gains (1/s) stay below 1 / the monitor's horizon, so the monitor's
     #: rollout of a held command ends inside the segment, not past it at a wall. Full speed
@@ -293,6 +303,7 @@ class ManoeuvreParams:
         _check(self, {"k_speed": ">0", "k_yaw": ">0", "k_lateral": ">0"})
         _check(self, {"min_speed_mps": ">0", "min_yaw_rate_radps": ">0", "done_m": ">0"})
         _check(self, {"done_rad": ">0", "timeout_factor": ">0", "timeout_s": ">=0"})
+        _check(self, {"detour_ratio": ">=0", "detour_s": ">=0", "detour_wait_s": ">=0"})
 
 
 @dataclass(frozen=True, kw_only=True)
