@@ -34,6 +34,15 @@ STILL_RADPS = 0.05
 TURN_STEP_RAD = float(np.deg2rad(5.0))
 
 
+def segment_time(segment, speed_mps: float, yaw_rate_radps: float) -> float:
+    """How long a manoeuvre's segment ``(kind, start, end)`` takes at this speed and yaw rate
+    (s): a turn its angle, a run its length."""
+    kind, a, b = segment
+    if kind == "turn":
+        return abs(float(wrap_angle(b[2] - a[2]))) / yaw_rate_radps
+    return float(np.hypot(b[0] - a[0], b[1] - a[1])) / speed_mps
+
+
 def turn_clear(occ, origin, res: float, fp, pose: np.ndarray, want: float, grow_m: float) -> bool:
     """Whether footprint ``fp`` turns on the spot at ``pose`` to heading ``want``, the short
     way round, clear of the window ``occ`` (checked every 5 degrees, grown by ``grow_m``)."""
@@ -362,13 +371,7 @@ class ManoeuvrePlanner:
         """How long skid ``i`` takes to drive ``segments`` at the manoeuvre's speed (s)."""
         share = self.params.speed_share
         speed, rate = float(view.max_speed[i]) * share, float(view.max_yaw_rate[i]) * share
-        total = 0.0
-        for kind, a, b in segments:
-            if kind == "turn":
-                total += abs(float(wrap_angle(b[2] - a[2]))) / rate
-            else:
-                total += float(np.hypot(b[0] - a[0], b[1] - a[1])) / speed
-        return total
+        return sum(segment_time(seg, speed, rate) for seg in segments)
 
     def _plan(
         self,
@@ -523,11 +526,7 @@ class ManoeuvrePlanner:
         while st.seg < len(st.segments):
             kind, a, b = st.segments[st.seg]
             if not np.isfinite(st.seg_deadline):
-                expect = (
-                    abs(wrap_angle(b[2] - a[2])) / w_max
-                    if kind == "turn"
-                    else float(np.hypot(*(b[:2] - a[:2]))) / v_max
-                )
+                expect = segment_time(st.segments[st.seg], v_max, w_max)
                 st.seg_deadline = view.t + p.timeout_factor * expect + p.timeout_s
             if kind == "turn":
                 err = wrap_angle(b[2] - pose[2])
