@@ -51,9 +51,12 @@ class Bottlenecks:
     def cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Row and column of world points ``(K, 2)`` (clipped to the grid)."""
         h, w = self.zone.shape
-        c = np.clip(np.floor((xy[:, 0] - self.origin[0]) / self.resolution_m).astype(int), 0, w - 1)
-        r = np.clip(np.floor((xy[:, 1] - self.origin[1]) / self.resolution_m).astype(int), 0, h - 1)
-        return r, c
+        # np.minimum/np.maximum, not np.clip: the same integers, and the traffic control
+        # calls this for every skid near a zone every tick, where np.clip's overhead was
+        # two thirds of its cost.
+        c = np.floor((xy[:, 0] - self.origin[0]) / self.resolution_m).astype(int)
+        r = np.floor((xy[:, 1] - self.origin[1]) / self.resolution_m).astype(int)
+        return np.minimum(np.maximum(r, 0), h - 1), np.minimum(np.maximum(c, 0), w - 1)
 
     def zone_at(self, xy: np.ndarray) -> np.ndarray:
         """Zone number at world points ``(K, 2)`` (0: none)."""
