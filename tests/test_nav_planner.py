@@ -106,6 +106,8 @@ def test_planner_params_name_the_bad_field():
         PlannerParams(plan_resolution_m=-0.1)
     with pytest.raises(ValueError, match=r"PlannerParams.zone_band_m must be .*>= 0 \(got -0.1\)"):
         PlannerParams(zone_band_m=-0.1)
+    with pytest.raises(ValueError, match="PlannerParams.door_throat_skids"):
+        PlannerParams(door_throat_skids=float("nan"))
 
 
 def test_a_repair_asked_for_over_the_ticks_budget_waits_for_the_next_update():
@@ -162,3 +164,22 @@ def test_through_a_door_the_path_keeps_to_the_middle_and_turns_past_it():
     assert np.all(np.abs(ys - 3.0) < 0.1), ys
     assert not np.all(np.abs(np.interp(xs, narrow[:, 0], narrow[:, 1]) - 3.0) < 0.1)
     assert wide[-1] == pytest.approx([6.6, 0.9])
+
+
+def test_through_a_narrow_corridor_the_band_stays_as_elsewhere():
+    # A 3 m corridor 1.6 m wide between two rooms: a bottleneck zone, but no door (its
+    # throat is the corridor's length, over two skid lengths), so the path is the same with
+    # the doors' band or without it.
+    walls = [(3.5, 0.0, 6.5, 2.2), (3.5, 3.8, 6.5, 6.0)]
+    view = make_view([[1.0, 5.0, 0.0]], [[9.0, 1.0, -np.pi / 2]], boxes=walls)
+    zones = TrafficControl(TrafficParams()).bottlenecks
+    z = zones(view)
+    assert z.count == 1 and z.throats_m[0] > 2.0 * view.footprints[0].length_m, z.throats_m
+
+    def path(band):
+        pl = Planner(
+            PlannerParams(zone_band_m=band), staging_m=0.9, direct_within_m=1.8, zones=zones
+        )
+        return pl.plan(pl.costmap(view, view.footprints[0]), view.poses[0], view.goals[0])
+
+    assert np.array_equal(path(0.0), path(0.5))

@@ -44,7 +44,8 @@ class Planner:
     zones
         A function of the view giving the map's bottleneck zones
         (:class:`~swarmpark.plan.bottlenecks.Bottlenecks`, kept while the map and the fleet
-        are), where the costmap's band is ``params.zone_band_m`` wider (None: nowhere).
+        are); in those that are doors the costmap's band is ``params.zone_band_m`` wider
+        (None: nowhere).
     """
 
     def __init__(
@@ -89,7 +90,7 @@ class Planner:
                 resolution_m=p.plan_resolution_m,
                 seen_within_m=p.seen_within_m,
                 blind_weight=p.blind_weight,
-                wide_at=None if z is None or z.count == 0 else (lambda xy: z.zone_at(xy) > 0),
+                wide_at=None if z is None else _in_doors(z, view.footprints, p),
                 wide_band_m=p.zone_band_m,
             )
         return self._costmaps[key]
@@ -331,3 +332,16 @@ def run_clear(grid, goal: np.ndarray, stage: np.ndarray, footprint: Footprint) -
     if not inside.all():
         return False
     return not grid.occupied[rc[:, 0], rc[:, 1]].any()
+
+
+def _in_doors(z, footprints, p: PlannerParams):
+    """A function of world points ``(K, 2)``: which lie in a door, a zone of ``z`` whose
+    throat is at most ``p.door_throat_skids`` of the longest skid's lengths long (None: no
+    zone is a door). Through a narrow corridor the band stays as elsewhere: a corridor's
+    path has no jamb to turn round, and with the band there too the held-out corridors
+    lost skids (docs/navigation.md, session 53, which says how this split was chosen)."""
+    longest = max(f.length_m for f in footprints)
+    doors = [k + 1 for k, t in enumerate(z.throats_m) if t <= p.door_throat_skids * longest]
+    if not doors:
+        return None
+    return lambda xy: np.isin(z.zone_at(xy), doors)
