@@ -3,11 +3,13 @@
 
 import numpy as np
 import pytest
+import shapely
 from navkit import make_view
 
 from swarmpark.control.nav.follower import PathFollower, PathState
-from swarmpark.control.nav.params import FollowerParams, PlannerParams
+from swarmpark.control.nav.params import FollowerParams, PlannerParams, TrafficParams
 from swarmpark.control.nav.planner import Planner
+from swarmpark.control.nav.traffic import TrafficControl
 
 
 def _planner(**kw):
@@ -102,6 +104,10 @@ def test_planner_params_name_the_bad_field():
         PlannerParams(max_plan_cells_per_tick=0)
     with pytest.raises(ValueError, match="PlannerParams.plan_resolution_m"):
         PlannerParams(plan_resolution_m=-0.1)
+    with pytest.raises(ValueError, match=r"PlannerParams.zone_band_m must be .*>= 0 \(got -0.1\)"):
+        PlannerParams(zone_band_m=-0.1)
+    with pytest.raises(ValueError, match="PlannerParams.door_throat_skids"):
+        PlannerParams(door_throat_skids=float("nan"))
 
 
 def test_a_repair_asked_for_over_the_ticks_budget_waits_for_the_next_update():
@@ -128,3 +134,52 @@ def test_a_repair_asked_for_over_the_ticks_budget_waits_for_the_next_update():
     assert sorted(s.planned_t for s in states[:2]) == [1.0, 1.1]  # the other one the next
     pl.update(make_view(poses, goals, t=1.2), states, fol, fleet)
     assert sorted(s.planned_t for s in states[:2]) == [1.0, 1.1]  # and no more
+
+
+def test_through_a_door_the_path_keeps_to_the_middle_and_turns_past_it():
+    # A wall across the hall at x = 5 with a 1.6 m door (y 2.2-3.8), a bottleneck zone for
+    # these skids; the goal lies just past the door and below it, so the shortest way cuts
+    # the door's lower jamb. In the zone the band is wider: the path keeps off the jamb.
+    walls = [(4.85, 0.0, 5.15, 2.2), (4.85, 3.8, 5.15, 6.0)]
+    view = make_view([[2.0, 3.0, 0.0]], [[6.6, 0.9, -np.pi / 2]], boxes=walls)
+    jambs = [shapely.box(*w) for w in walls]
+
+    def path(band, zones=True):
+        pl = Planner(
+            PlannerParams(zone_band_m=band),
+            staging_m=0.9,
+            direct_within_m=1.8,
+            zones=TrafficControl(TrafficParams()).bottlenecks if zones else None,
+        )
+        return pl.plan(pl.costmap(view, view.footprints[0]), view.poses[0], view.goals[0])
+
+    narrow, wide = path(0.0), path(0.5)
+    assert np.array_equal(narrow, path(0.5, zones=False))  # no zones: as with no band
+    clear = [min(shapely.LineString(p).distance(j) for j in jambs) for p in (narrow, wide)]
+    assert clear[1] > clear[0] + 0.03, clear
+    # Through the door (x 4.85-5.15) and on to the zone's end it runs along the middle,
+    # where the shortest way has turned for the goal already.
+    xs = np.linspace(4.55, 5.9, 10)
+    ys = np.interp(xs, wide[:, 0], wide[:, 1])
+    assert np.all(np.abs(ys - 3.0) < 0.1), ys
+    assert not np.all(np.abs(np.interp(xs, narrow[:, 0], narrow[:, 1]) - 3.0) < 0.1)
+    assert wide[-1] == pytest.approx([6.6, 0.9])
+
+
+def test_through_a_narrow_corridor_the_band_stays_as_elsewhere():
+    # A 3 m corridor 1.6 m wide between two rooms: a bottleneck zone, but no door (its
+    # throat is the corridor's length, over two skid lengths), so the path is the same with
+    # the doors' band or without it.
+    walls = [(3.5, 0.0, 6.5, 2.2), (3.5, 3.8, 6.5, 6.0)]
+    view = make_view([[1.0, 5.0, 0.0]], [[9.0, 1.0, -np.pi / 2]], boxes=walls)
+    zones = TrafficControl(TrafficParams()).bottlenecks
+    z = zones(view)
+    assert z.count == 1 and z.throats_m[0] > 2.0 * view.footprints[0].length_m, z.throats_m
+
+    def path(band):
+        pl = Planner(
+            PlannerParams(zone_band_m=band), staging_m=0.9, direct_within_m=1.8, zones=zones
+        )
+        return pl.plan(pl.costmap(view, view.footprints[0]), view.poses[0], view.goals[0])
+
+    assert np.array_equal(path(0.0), path(0.5))

@@ -81,7 +81,7 @@ def test_a_skid_standing_in_the_zone_comes_from_the_side_its_path_leads_away_fro
     # it: both are one convoy (counted from no side, it refused skid 0 the door for good).
     view, paths = _setup([[1.2, 3.0, 0.0], [4.3, 3.0, 0.0]], [[9.0, 3.0, 0.0], [8.0, 3.5, 0.0]])
     tc = TrafficControl(TrafficParams(convoy_gap_s=0.0))
-    assert tc._zones(view).zone_at(np.array([[4.3, 3.0]]))[0] == 1
+    assert tc.bottlenecks(view).zone_at(np.array([[4.3, 3.0]]))[0] == 1
     states = [TrafficState(), TrafficState()]
     fol = PathFollower(FollowerParams())
     tc.step(view, np.arange(2), np.zeros((2, 2)), paths, fol, states, np.zeros(2, bool))

@@ -34,8 +34,10 @@ THROAT_TOLERANCE_M = 0.3
 class Bottlenecks:
     """The zones of a map on a (coarse) grid: ``zone`` ``(H, W)`` int (0 outside every zone,
     ``k`` in zone ``k``), ``region`` ``(H, W)`` int (the connected free space outside the zones,
-    0 elsewhere), each zone's outline as a polygon (``polygons[k - 1]``) and its narrowest free
-    width (m)."""
+    0 elsewhere), each zone's outline as a polygon (``polygons[k - 1]``), its narrowest free
+    width (m) and the length of its throat (m, the skeleton within
+    :data:`THROAT_TOLERANCE_M` of that width: about 1.5 m for a door in a wall, the length of
+    a corridor of even width)."""
 
     zone: np.ndarray
     region: np.ndarray
@@ -43,6 +45,7 @@ class Bottlenecks:
     widths_m: tuple
     resolution_m: float
     origin: np.ndarray
+    throats_m: tuple = ()
 
     @property
     def count(self) -> int:
@@ -100,7 +103,7 @@ def find_bottlenecks(
     narrow = skel & (width < lane_width_m)
     comp, n = ndimage.label(narrow, structure=np.ones((3, 3)))
     zone = np.zeros(free.shape, int)
-    polygons, widths = [], []
+    polygons, widths, throats = [], [], []
     for k in range(1, n + 1):
         pts = comp == k
         w_min = float(width[pts].min())
@@ -115,8 +118,11 @@ def find_bottlenecks(
         zone[cand] = len(polygons) + 1
         polygons.append(_outline(cand, res, g.origin))
         widths.append(w_min)
+        throats.append(float(np.count_nonzero(throat)) * res)
     region, _ = ndimage.label(free & (zone == 0), structure=np.ones((3, 3)))
-    return Bottlenecks(zone, region, tuple(polygons), tuple(widths), res, np.asarray(g.origin))
+    return Bottlenecks(
+        zone, region, tuple(polygons), tuple(widths), res, np.asarray(g.origin), tuple(throats)
+    )
 
 
 def _separates(free: np.ndarray, cand: np.ndarray) -> bool:

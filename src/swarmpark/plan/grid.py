@@ -60,11 +60,19 @@ def build_costmap(
     resolution_m: float | None = None,
     seen_within_m: float | None = None,
     blind_weight: float = 0.0,
+    wide_at=None,
+    wide_band_m: float = 0.0,
 ) -> Costmap:
     """Inflate ``grid`` (plus ``extra_occupied`` cells, e.g. detected obstacles) for a skid.
 
     With ``resolution_m`` coarser than the map, the map is first coarsened conservatively
     (a coarse cell is occupied if any of its cells is): fewer cells to search.
+
+    ``wide_at``: a function of world points ``(K, 2)`` giving ``(K,)`` bool; in the cells
+    whose centres it marks (doors and narrow corridors) the inflation band reaches
+    ``wide_band_m`` farther than ``circumscribed_m``, so a path through them keeps to the
+    middle (as a Navigation2 inflation radius beyond the circumscribed one) while elsewhere
+    it may pass as close as the circumscribed radius.
 
     Coastal navigation (Roy, Burgard, Fox and Thrun, "Coastal navigation - mobile robot
     navigation with uncertainty in dynamic environments", ICRA 1999): a skid that localizes
@@ -83,6 +91,13 @@ def build_costmap(
     d *= grid.resolution_m
     span = max(circumscribed_m - inscribed_m, 1e-9)
     cost = 1.0 + INFLATION_WEIGHT * np.clip((circumscribed_m - d) / span, 0.0, 1.0)
+    if wide_at is not None and wide_band_m > 0.0:
+        rows, cols = np.indices(occ.shape)
+        centres = grid.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
+        wide = np.asarray(wide_at(centres), dtype=bool).reshape(occ.shape)
+        outer = circumscribed_m + wide_band_m
+        band = 1.0 + INFLATION_WEIGHT * np.clip((outer - d) / (outer - inscribed_m), 0.0, 1.0)
+        cost = np.where(wide, band, cost)
     cost[d < inscribed_m] = np.inf
     blind = None
     if seen_within_m is not None:

@@ -91,18 +91,19 @@ class Navigator:
         stall_s = p.stall.time_s
         self.scene = Scene(p.apf.outline_step_m, p.monitor.margin_m)
         self.follower = PathFollower(p.follower)
+        self.traffic = TrafficControl(p.traffic)
         self.planner = Planner(
             p.planner,
             staging_m=p.docking.runup_m,
             direct_within_m=p.docking.manoeuvre_radius_m,
             fleet_params=p.fleet_map,
             people=p.people if p.people.enabled else None,
+            zones=self.traffic.bottlenecks,
         )
         self.field = PotentialField(p.apf, dynamic=p.avoidance != "rvo")
         self.docking = Docking(p.docking, BackUp(p.backup, stall_s=stall_s), stall_s=stall_s)
         self.monitor = CollisionMonitor(p.monitor)
         self.manoeuvre = ManoeuvrePlanner(p.manoeuvre)
-        self.traffic = TrafficControl(p.traffic)
         self.give_way = GiveWay(p.give_way)
         self.keep_right = KeepRight(p.keep_right)
         self.make_room = MakeRoom(p.make_room)

@@ -135,11 +135,21 @@ class PlannerParams:
     seen_within_m: float | None = None
     #: Extra cost per metre through blind cells (0: paths ignore them).
     blind_weight: float = 0.0
+    #: In the doors (the bottleneck zones of :mod:`.traffic` whose throat is at most
+    #: ``door_throat_skids`` of the fleet's longest skid long) the costmap's inflation band
+    #: reaches this much farther than the skid's circumscribed radius, so a path through a
+    #: door keeps to its middle instead of grazing a jamb, where the walls' push on both
+    #: ends of the skid cancels its turn and it crawls (0: as elsewhere).
+    zone_band_m: float = 0.5
+    #: A zone is a door, not a narrow corridor, when its throat is at most this many of the
+    #: longest skid's lengths long (generated doors: 1.4-1.6 m; corridors: 6-14 m).
+    door_throat_skids: float = 2.0
 
     def __post_init__(self) -> None:
         _check(self, {"replan_period_s": ">0", "max_plans_per_tick": "int>0"})
         _check(self, {"max_plan_cells_per_tick": "int>0"})
         _check(self, {"staging_check_points": "int>0", "blind_weight": ">=0"})
+        _check(self, {"zone_band_m": ">=0", "door_throat_skids": ">=0"})
         if self.plan_resolution_m is not None:
             _check(self, {"plan_resolution_m": ">0"})
         if self.seen_within_m is not None:

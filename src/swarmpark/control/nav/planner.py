@@ -41,6 +41,11 @@ class Planner:
         :class:`~swarmpark.control.nav.params.PeopleParams` of the people yield: a stuck
         skid's repair keeps its stand-off from the people standing (None: people are left
         out of plans).
+    zones
+        A function of the view giving the map's bottleneck zones
+        (:class:`~swarmpark.plan.bottlenecks.Bottlenecks`, kept while the map and the fleet
+        are); in those that are doors the costmap's band is ``params.zone_band_m`` wider
+        (None: nowhere).
     """
 
     def __init__(
@@ -51,8 +56,11 @@ class Planner:
         direct_within_m: float,
         fleet_params: FleetMapParams | None = None,
         people: PeopleParams | None = None,
+        zones=None,
     ):
         self.params = params
+        self._zones_of = zones
+        self._zones = None
         #: The people yield's stand-off, for a stuck skid's repair round people standing
         #: (None: people are left out of plans).
         self.people = people
@@ -70,10 +78,11 @@ class Planner:
     def costmap(self, view: ControlView, fp: Footprint) -> Costmap:
         """The costmap inflated for footprint ``fp`` on the view's grid (cached)."""
         key = (round(fp.width_m / 2, 4), round(fp.reach_m, 4))
-        if self._grid is not view.grid:
-            self._costmaps, self._grid = {}, view.grid
+        p = self.params
+        z = self._zones_of(view) if self._zones_of is not None and p.zone_band_m > 0 else None
+        if self._grid is not view.grid or self._zones is not z:
+            self._costmaps, self._grid, self._zones = {}, view.grid, z
         if key not in self._costmaps:
-            p = self.params
             self._costmaps[key] = build_costmap(
                 view.grid,
                 key[0],
@@ -81,6 +90,8 @@ class Planner:
                 resolution_m=p.plan_resolution_m,
                 seen_within_m=p.seen_within_m,
                 blind_weight=p.blind_weight,
+                wide_at=None if z is None else _in_doors(z, view.footprints, p),
+                wide_band_m=p.zone_band_m,
             )
         return self._costmaps[key]
 
@@ -321,3 +332,16 @@ def run_clear(grid, goal: np.ndarray, stage: np.ndarray, footprint: Footprint) -
     if not inside.all():
         return False
     return not grid.occupied[rc[:, 0], rc[:, 1]].any()
+
+
+def _in_doors(z, footprints, p: PlannerParams):
+    """A function of world points ``(K, 2)``: which lie in a door, a zone of ``z`` whose
+    throat is at most ``p.door_throat_skids`` of the longest skid's lengths long (None: no
+    zone is a door). Through a narrow corridor the band stays as elsewhere: a corridor's
+    path has no jamb to turn round, and with the band there too the held-out corridors
+    lost skids (docs/navigation.md, session 53, which says how this split was chosen)."""
+    longest = max(f.length_m for f in footprints)
+    doors = [k + 1 for k, t in enumerate(z.throats_m) if t <= p.door_throat_skids * longest]
+    if not doors:
+        return None
+    return lambda xy: np.isin(z.zone_at(xy), doors)

@@ -93,9 +93,9 @@ class TrafficControl:
 
     def prepare(self, view: ControlView) -> None:
         """Find the map's bottlenecks now (before the first tick)."""
-        self._zones(view)
+        self.bottlenecks(view)
 
-    def _zones(self, view: ControlView) -> Bottlenecks:
+    def bottlenecks(self, view: ControlView) -> Bottlenecks:
         """The map's bottlenecks for this fleet (recomputed when the map or fleet changes)."""
         fps = tuple(view.footprints)
         if self.zones is None or self._grid is not view.grid or self._fps != fps:
@@ -137,7 +137,7 @@ class TrafficControl:
     ) -> np.ndarray:
         """Update the grants and stop (in place on ``cmd``, rows of all skids) the skids that
         must wait; returns which of ``idx`` wait."""
-        z = self._zones(view)
+        z = self.bottlenecks(view)
         waiting = np.zeros(len(idx), dtype=bool)
         if z.count == 0:
             return waiting
