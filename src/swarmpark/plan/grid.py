@@ -69,7 +69,7 @@ def build_costmap(
     (a coarse cell is occupied if any of its cells is): fewer cells to search.
 
     ``wide_at``: a function of world points ``(K, 2)`` giving ``(K,)`` bool; in the cells
-    whose centres it marks (doors and narrow corridors) the inflation band reaches
+    whose centres it marks (the navigator's planner marks doors) the inflation band reaches
     ``wide_band_m`` farther than ``circumscribed_m``, so a path through them keeps to the
     middle (as a Navigation2 inflation radius beyond the circumscribed one) while elsewhere
     it may pass as close as the circumscribed radius.
